@@ -57,9 +57,24 @@ class AbstractKernel(eqx.Module):
         x2 = None if x is None else x[None, :, :]
         return self(m[:, None], m[None, :], x1, x2)
 
-    @property
-    def is_additive_in_mass(self) -> bool:
-        return False
+    def relative_velocity2(self, m1, m2, x1=None, x2=None):
+        """Squared relative velocity [cm^2 s^-2] behind the kernel (physical kernels only).
+
+        Velocity-dependent outcomes (fragmentation with v_frag, bouncing) call this. Analytic
+        kernels have no velocity and raise a TypeError saying so.
+        """
+        raise TypeError(
+            f"{type(self).__name__} is an analytic kernel with no relative velocity; velocity-dependent "
+            "outcomes (fragmentation with v_frag, bouncing) need a physical kernel built from a Scene "
+            "(jaxcoag.Scene(...).kernel(gas, material)) or a subclass implementing relative_velocity2."
+        )
+
+    def matrix_and_dv2(self, m, x=None):
+        """(K, dv^2) N x N matrices on masses ``m``; physical kernels override to share work."""
+        m = jnp.asarray(m)
+        x1 = None if x is None else x[:, None, :]
+        x2 = None if x is None else x[None, :, :]
+        return self.matrix(m, x), self.relative_velocity2(m[:, None], m[None, :], x1, x2)
 
 
 def _leaf(x, name, **kw):
