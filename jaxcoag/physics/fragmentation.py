@@ -21,9 +21,11 @@ _X_MAX = 1.0e3  # (v_frag/dv)^2 above which p_f underflows to 0 anyway
 
 
 def _ratio2(dv2, v_frag):
+    """min((v_frag/dv)^2, _X_MAX) with finite gradients at dv2 = 0 (double-where)."""
     dv2 = jnp.asarray(dv2)
-    tiny = jnp.finfo(jnp.result_type(dv2, float)).tiny
-    return jnp.minimum(jnp.asarray(v_frag) ** 2 / jnp.maximum(dv2, tiny), _X_MAX)
+    vf2 = jnp.asarray(v_frag) ** 2
+    ok = dv2 * _X_MAX > vf2
+    return jnp.where(ok, vf2 / jnp.where(ok, dv2, 1.0), _X_MAX)
 
 
 def p_frag_maxwellian(dv2, v_frag):
@@ -57,6 +59,6 @@ def p_frag_sigmoid(dv2, v_frag, width=0.1):
     """Smooth step in log velocity: 1/(1 + (v_frag/dv)^(1/width)), i.e. a logistic in ln dv of
     width ``width`` (in ln units), centred on v_frag. Differentiable surrogate of the hard step.
     """
-    x = _ratio2(dv2, v_frag)  # (v_frag/dv)^2
+    x = _ratio2(dv2, v_frag)  # (v_frag/dv)^2, capped: p = 0 exactly at the cap
     # logistic(ln(dv/v_frag)/width) = 1/(1 + exp(-ln(dv/v_f)/width)) = 1/(1 + x^(1/(2 width)))
-    return jnp.exp(-jnp.logaddexp(0.0, jnp.log(x) / (2.0 * width)))
+    return jnp.where(x < _X_MAX, jnp.exp(-jnp.logaddexp(0.0, jnp.log(x) / (2.0 * width))), 0.0)
