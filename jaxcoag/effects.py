@@ -1,0 +1,137 @@
+"""Velocity effects: thin ``equinox`` Modules that select physics for a :class:`~jaxcoag.Scene`.
+
+Each effect contributes a squared relative velocity Delta v_k^2 [cm^2 s^-2] for pairs of
+particles; a scene adds the effects it names in quadrature (Ormel 2008 §4.3, text under eq. 4.26;
+as DustPy's ``vrel_tot``) and the kernel takes ONE safe square root of the total
+(spec/velocities.md §6, §8.1). An effect that is not named is never traced.
+
+Per-particle work (e.g. the OC07 class boundary St*, a root solve) is done once per particle in
+``per_particle`` and passed to ``dv2`` for the pairs, so an N x N kernel matrix costs N root
+solves, not N^2 (spec/velocities.md §8.6).
+
+Particle properties are passed as a :class:`Particles` record (mass, radius, area, friction time,
+Stokes number), broadcast-compatible between the two collision partners.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .physics import drift as _drift
+from .physics import turbulence as _turb
+from .physics.gas import GasState
+
+__all__ = [
+    "Particles",
+    "AbstractVelocity",
+    "Brownian",
+    "TurbulenceOC07",
+    "RadialDrift",
+    "AzimuthalDrift",
+    "Settling",
+]
+
+
+class Particles(eqx.Module):
+    """Per-particle properties [cgs] used by velocity effects (broadcasting arrays).
+
+    Fields: m [g], a [cm] (geometric radius), area [cm^2] (projected), tau_f [s] (friction time),
+    st [-] (Stokes number tau_f / t_L).
+    """
+
+    m: jax.Array
+    a: jax.Array
+    area: jax.Array
+    tau_f: jax.Array
+    st: jax.Array
+
+    def expand(self, axis: int) -> "Particles":
+        """Insert a length-1 axis in every field (for outer-product pair broadcasting)."""
+        return jax.tree_util.tree_map(lambda v: jnp.expand_dims(v, axis), self)
+
+
+class AbstractVelocity(eqx.Module):
+    """A relative-velocity contribution. Subclasses set ``name`` and implement ``dv2``."""
+
+    name: ClassVar[str] = "abstract"
+    extension: ClassVar[bool] = False  # True for [EXT] effects not taken from the thesis
+
+    def per_particle(self, p: Particles, gas: GasState):
+        """Per-particle precomputation (default: nothing)."""
+        return None
+
+    @abc.abstractmethod
+    def dv2(self, p1: Particles, c1, p2: Particles, c2, gas: GasState):
+        """Squared relative velocity [cm^2 s^-2] for the pairs (p1, p2) (broadcasting)."""
+
+
+class Brownian(AbstractVelocity):
+    """Brownian motion, Delta v^2 = (8 k_B T/pi)(1/m1 + 1/m2) (thesis eqs. 1.23, 2.1, 4.4)."""
+
+    name: ClassVar[str] = "brownian"
+
+    def dv2(self, p1, c1, p2, c2, gas):
+        return _drift._dv2_brownian(p1.m, p2.m, gas.T)
+
+
+class TurbulenceOC07(AbstractVelocity):
+    """Turbulent relative velocity of Ormel & Cuzzi (2007), full closed form (thesis ch. 3,
+    eqs. 3.14-3.15 in the bounded-factor form of spec/velocities.md §4.3).
+
+    Attributes:
+        method: "exact" (root of eq. 3.21), "ya" (t* = 1.6 tau_f) or "ch03" (static).
+        accurate: use the App. 3.A power-law variant for class-II eddies (static).
+        beta_over_alpha: eddy-crossing correction of eq. 3.21 (array leaf; default 0).
+    """
+
+    name: ClassVar[str] = "turbulence"
+    method: str = eqx.field(static=True, default="exact")
+    accurate: bool = eqx.field(static=True, default=False)
+    beta_over_alpha: jax.Array = eqx.field(default_factory=lambda: jnp.asarray(0.0))
+
+    def __check_init__(self):
+        if self.method not in ("exact", "ya", "ch03"):
+            raise ValueError(f"TurbulenceOC07: unknown method {self.method!r}; use 'exact', 'ya' or 'ch03'")
+
+    def per_particle(self, p, gas):
+        return _turb.st_star(p.st, gas.Re_eff, method=self.method, beta_over_alpha=self.beta_over_alpha)
+
+    def dv2(self, p1, c1, p2, c2, gas):
+        dvI2, dvII2 = _turb.dv2_terms_oc07(p1.st, p2.st, c1, c2, gas.Re_eff, accurate=self.accurate)
+        return gas.v_g ** 2 * (dvI2 + dvII2)
+
+
+class RadialDrift(AbstractVelocity):
+    """Differential radial drift, Delta v_r = 2 eta v_K |St1/(1+St1^2) - St2/(1+St2^2)| (thesis eq. 4.8)."""
+
+    name: ClassVar[str] = "radial_drift"
+
+    def dv2(self, p1, c1, p2, c2, gas):
+        return _drift._dv2_radial_drift(p1.st, p2.st, gas.eta, gas.v_K)
+
+
+class AzimuthalDrift(AbstractVelocity):
+    """[EXT] Differential azimuthal (headwind) drift, eta v_K |1/(1+St1^2) - 1/(1+St2^2)|
+    (derived from the same single-particle equations as eq. 4.8; not in the thesis)."""
+
+    name: ClassVar[str] = "azimuthal_drift"
+    extension: ClassVar[bool] = True
+
+    def dv2(self, p1, c1, p2, c2, gas):
+        return _drift._dv2_azimuthal_drift(p1.st, p2.st, gas.eta, gas.v_K)
+
+
+class Settling(AbstractVelocity):
+    """[EXT] Differential vertical settling at the gas state's height z, Delta v_z = |z| Omega
+    |St1/(1+St1) - St2/(1+St2)| (ch. 1 §1.2.1 terminal velocity, capped for St >~ 1)."""
+
+    name: ClassVar[str] = "settling"
+    extension: ClassVar[bool] = True
+
+    def dv2(self, p1, c1, p2, c2, gas):
+        return _drift._dv2_settling(p1.st, p2.st, gas.z, gas.Omega)
