@@ -48,8 +48,8 @@ def check(x, name: str, *, positive: bool = False, nonnegative: bool = False,
         finite: require no NaN/inf.
         hint: extra sentence telling the user what to change.
     """
-    traced = is_traced(x)
-    arr = x if traced else jnp.asarray(x)
+    arr = x if is_traced(x) else jnp.asarray(x)
+    traced = is_traced(arr)  # inside jit even constants can become tracers
     if not jnp.issubdtype(arr.dtype, jnp.floating):
         arr = arr.astype(jnp.result_type(float))
     what = []
