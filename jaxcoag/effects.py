@@ -112,7 +112,8 @@ class RadialDrift(AbstractVelocity):
     name: ClassVar[str] = "radial_drift"
 
     def dv2(self, p1, c1, p2, c2, gas):
-        return _drift._dv2_radial_drift(p1.st, p2.st, gas.eta, gas.v_K)
+        # drift uses Omega tau_f (eq. 4.8), which equals St only for t_L = 1/Omega
+        return _drift._dv2_radial_drift(p1.tau_f * gas.Omega, p2.tau_f * gas.Omega, gas.eta, gas.v_K)
 
 
 class AzimuthalDrift(AbstractVelocity):
@@ -123,7 +124,7 @@ class AzimuthalDrift(AbstractVelocity):
     extension: ClassVar[bool] = True
 
     def dv2(self, p1, c1, p2, c2, gas):
-        return _drift._dv2_azimuthal_drift(p1.st, p2.st, gas.eta, gas.v_K)
+        return _drift._dv2_azimuthal_drift(p1.tau_f * gas.Omega, p2.tau_f * gas.Omega, gas.eta, gas.v_K)
 
 
 class Settling(AbstractVelocity):
@@ -134,4 +135,4 @@ class Settling(AbstractVelocity):
     extension: ClassVar[bool] = True
 
     def dv2(self, p1, c1, p2, c2, gas):
-        return _drift._dv2_settling(p1.st, p2.st, gas.z, gas.Omega)
+        return _drift._dv2_settling(p1.tau_f * gas.Omega, p2.tau_f * gas.Omega, gas.z, gas.Omega)

@@ -185,3 +185,13 @@ def test_presets_name_their_effects():
     assert scenes.nebula_ch4().effect_names == ("brownian", "turbulence", "radial_drift")
     assert scenes.dustpy_like().effect_names == ("brownian", "turbulence", "radial_drift", "azimuthal_drift", "settling")
     assert scenes.get("molecular_cloud").effect_names == ("brownian", "turbulence")
+
+
+def test_drift_uses_omega_tau_f_whatever_the_eddy_time_convention():
+    # with t_L = 2 pi / Omega (ch. 2 legacy) St = tau_f/t_L changes, but drift depends on Omega tau_f
+    g1 = G.ch4_disk(3 * C.AU)
+    g2 = G.ch4_disk(3 * C.AU, tL_factor=2 * np.pi)
+    sc = Scene(velocities=(E.RadialDrift(),))
+    d1 = sc.kernel(g1, rho_s=RHO_S).relative_velocity2(M[:, None], M[None, :])
+    d2 = sc.kernel(g2, rho_s=RHO_S).relative_velocity2(M[:, None], M[None, :])
+    np.testing.assert_allclose(d1, d2, rtol=1e-13)
