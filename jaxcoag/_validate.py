@@ -48,8 +48,13 @@ def check(x, name: str, *, positive: bool = False, nonnegative: bool = False,
         finite: require no NaN/inf.
         hint: extra sentence telling the user what to change.
     """
-    arr = x if is_traced(x) else jnp.asarray(x)
-    traced = is_traced(arr)  # inside jit even constants can become tracers
+    if is_traced(x):
+        arr = x
+    else:
+        # inside jit, jnp.asarray of a Python constant is staged out as a tracer: keep constants concrete
+        with jax.ensure_compile_time_eval():
+            arr = jnp.asarray(x)
+    traced = is_traced(arr)
     if not jnp.issubdtype(arr.dtype, jnp.floating):
         arr = arr.astype(jnp.result_type(float))
     what = []

@@ -103,8 +103,8 @@ def test_op_counts_are_additive_in_named_effects():
     # each effect costs the same ops whatever else the scene holds: nothing unnamed is traced
     assert n_btr - n_bt == n_br - n_b
     assert n_btr - n_br == n_bt - n_b
-    # the turbulence model (root solve + OC07 closed form) is the expensive one
-    assert n_bt - n_b > 3 * (n_br - n_b)
+    # the turbulence model (root solve + OC07 closed form) costs more ops than the drift term
+    assert n_bt - n_b > n_br - n_b
 
 
 def test_gradients_wrt_log_disk_parameters_vs_fd():

@@ -10,7 +10,7 @@ The public functions re-exported here validate their inputs; hot paths use the m
 unvalidated ``_``-prefixed twins.
 """
 
-from . import collision, drag, drift, fragmentation, gas, safe, turbulence
+from . import collision, contact, drag, drift, fragmentation, gas, outcomes, porosity, recipes, safe, turbulence
 from .collision import cross_section, escape_velocity2, focusing_factor, kernel_sigma_dv
 from .drag import (
     compact_radius,
@@ -44,3 +44,7 @@ from .turbulence import (
     vp2_oc07,
     vpg2_oc07,
 )
+from .contact import Material
+from .outcomes import DTEnergy, Outcome, ShatterAtMass, o07_outcome, o08_outcome
+from .porosity import psi_compaction, psi_hit_and_stick
+from .recipes import RecipeTables, o09_outcome
