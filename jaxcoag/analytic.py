@@ -120,6 +120,21 @@ def log_nk(kind, k, t, *, coeff=1.0, n0=1.0, m0=1.0):
         return np.where(big, large, small)
 
 
+def _log_ive1(z):
+    """ln(exp(-z) I_1(z)) for z > 0, finite for every z.
+
+    scipy's ``ive(1, z)`` returns NaN above z ~ 1e9; there the Hankel expansion
+    exp(-z) I_1(z) = (1 - 3/(8z) - 15/(128 z^2) + O(z^-3)) / sqrt(2 pi z) is exact to < 1e-18
+    (Abramowitz & Stegun 9.7.1).
+    """
+    z = np.asarray(z, dtype=float)
+    big = z > 1e6
+    zs = np.where(big, 1.0, z)
+    zb = np.where(big, z, 1e6)
+    asym = np.log1p(-3.0 / (8.0 * zb) - 15.0 / (128.0 * zb * zb)) - 0.5 * np.log(2.0 * np.pi * zb)
+    return np.where(big, asym, np.log(special.ive(1, zs)))
+
+
 def _log_f_exponential(kind, m, t, coeff, n0, m0):
     """ln f(m, t) [ln cm^-3 g^-1] for f(m, 0) = (n0/m0) exp(-m/m0)."""
     x = np.asarray(m, float) / m0
@@ -137,7 +152,7 @@ def _log_f_exponential(kind, m, t, coeff, n0, m0):
             sT = np.sqrt(T)
             z = 2.0 * sT * x
             # f = n0/m0 (1-T)/(x sqrt T) exp(-(1+T)x) I1(2 sqrt(T) x);  I1(z) = ive(1,z) e^z
-            return (base + np.log(eps) - np.log(x * sT) + np.log(special.ive(1, z))
+            return (base + np.log(eps) - np.log(x * sT) + _log_ive1(z)
                     - (1.0 - sT) ** 2 * x)
         # product, pre-gel (tau < 1/2): f = e^{-(1+tau)x} sum_k tau^{k-1} x^{3k-3} / (k! (2k-1)!)
         if tau >= 0.5:

@@ -124,3 +124,20 @@ def test_input_errors():
         A.number_density("product", 1.0, 0.6, initial="exponential")
     with pytest.raises(JaxcoagInputError, match="increasing"):
         A.mass_per_bin("sum", [1.0, 0.5, 2.0], 1.0)
+
+
+def test_sum_kernel_exponential_start_keeps_mass_at_late_times():
+    # regression: scipy's ive(1, z) is NaN above z ~ 1e9, which silently dropped mass (0.543 at tau = 10)
+    from jaxcoag import analytic
+    from jaxcoag.binned import MassGrid
+
+    g = MassGrid.log(1e-6, 1e22, 10)
+    for t, tol in ((10.0, 1e-10), (20.0, 1e-6)):
+        mb = analytic.mass_per_bin("sum", g.edges, t, coeff=1.0, initial="exponential")
+        assert np.all(np.isfinite(mb))
+        np.testing.assert_allclose(np.sum(mb), 1.0, rtol=tol)
+    z = np.array([1e5, 1e7, 1e12])
+    from scipy import special
+    np.testing.assert_allclose(analytic._log_ive1(z[:1]), np.log(special.ive(1, z[:1])), rtol=1e-14)
+    np.testing.assert_allclose(analytic._log_ive1(z[1:2]), np.log(special.ive(1, z[1:2])), rtol=1e-12)
+    assert np.isfinite(analytic._log_ive1(z[2:]))
