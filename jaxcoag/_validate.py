@@ -50,13 +50,15 @@ def check(x, name: str, *, positive: bool = False, nonnegative: bool = False,
     """
     if is_traced(x):
         arr = x
+        if not jnp.issubdtype(arr.dtype, jnp.floating):
+            arr = arr.astype(jnp.result_type(float))
     else:
-        # inside jit, jnp.asarray of a Python constant is staged out as a tracer: keep constants concrete
+        # inside jit, jnp ops on Python constants are staged out as tracers: keep constants concrete
         with jax.ensure_compile_time_eval():
             arr = jnp.asarray(x)
+            if not jnp.issubdtype(arr.dtype, jnp.floating):
+                arr = arr.astype(jnp.result_type(float))
     traced = is_traced(arr)
-    if not jnp.issubdtype(arr.dtype, jnp.floating):
-        arr = arr.astype(jnp.result_type(float))
     what = []
     if finite:
         what.append("finite")

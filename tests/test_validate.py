@@ -26,3 +26,11 @@ def test_traced_check_raises_at_runtime():
 def test_require_x64_passes_in_tests():
     require_x64("test")  # conftest enables x64
     assert jnp.asarray(1.0).dtype == jnp.float64
+
+
+def test_python_constants_inside_jit_stay_concrete():
+    # ints and floats written inside a jitted function are checked eagerly (no tracer conversion error)
+    f = jax.jit(lambda x: check(3, "n", positive=True) * check(2.0, "y", positive=True) * x)
+    assert float(f(1.0)) == 6.0
+    with pytest.raises(JaxcoagInputError, match="`n`"):
+        jax.jit(lambda x: check(-3, "n", positive=True) * x)(1.0)

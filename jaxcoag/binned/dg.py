@@ -175,7 +175,6 @@ class _Geometry:
                 for e in lines:
                     for qe in (dl, cl):
                         tl = [xs[e], -qe]
-                        v = _fsum(tl)
                         if _fsum(tl + [-cs]) > 0 and _fsum([ds] + [-t for t in tl]) > 0:
                             bps.append(tl)
                 bps.sort(key=_fsum)

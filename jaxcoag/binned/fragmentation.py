@@ -182,7 +182,6 @@ class Shattering(AbstractFragmentation):
 
     def twobin_data(self, kernel, grid, iL, iS):
         """FragData: shattering (ratio < crater_ratio) / erosion (ratio >= crater_ratio)."""
-        N = grid.nbins
         lc = grid.log_centers
         mL, mS = np.exp(lc[iL]), np.exp(lc[iS])
         crater = (lc[iL] - lc[iS]) >= np.log(self.crater_ratio)

@@ -58,12 +58,7 @@ __all__ = [
     "Material",
 ]
 
-def _chk(x, name, **kw):
-    """``check`` that also works for Python constants inside ``jit`` (see porosity._chk)."""
-    if is_traced(x):
-        return check(x, name, **kw)
-    with jax.ensure_compile_time_eval():
-        return check(x, name, **kw)
+_chk = check  # check() validates Python constants eagerly, also inside jit
 
 
 # ---------------------------------------------------------------------------------------------

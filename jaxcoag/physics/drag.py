@@ -24,10 +24,9 @@ References (Ormel 2008 PhD thesis; spec/velocities.md §2):
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 
-from .._validate import check, is_traced
+from .._validate import check
 from .safe import clamp_st, safe_sqrt
 
 __all__ = [
@@ -47,20 +46,7 @@ REGIMES = ("auto", "epstein", "stokes")
 SCALE_HEIGHT_FORMS = ("dubrulle", "ch1")
 
 
-def _check(x, name, **kw):
-    """:func:`jaxcoag._validate.check` that keeps concrete arguments concrete inside ``jax.jit``.
-
-    In jax 0.10 ``jnp.asarray`` of a Python/NumPy constant returns a tracer while tracing, so a
-    bad constant (e.g. ``rho_s=-3.0`` written inside a jitted function) would only be reported
-    at run time through ``eqx.error_if`` (or, with the original ``check``, fail with a
-    TracerArrayConversionError). Evaluating the concrete branch under
-    ``jax.ensure_compile_time_eval`` validates it immediately, at trace time, with a
-    JaxcoagInputError; traced arguments go through ``check``'s ``eqx.error_if`` path.
-    """
-    if is_traced(x):
-        return check(x, name, **kw)
-    with jax.ensure_compile_time_eval():
-        return check(x, name, **kw)
+_check = check  # check() validates Python constants eagerly, also inside jit
 
 
 def _regime_ok(regime):

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 import jax
 
-from .._validate import check, is_traced
+from .._validate import check
 from .safe import safe_log
 
 __all__ = [
@@ -50,13 +50,7 @@ __all__ = [
     "smooth_step",
 ]
 
-def _chk(x, name, **kw):
-    """``check`` that also works for Python/NumPy constants inside ``jit`` (there
-    ``jnp.asarray`` returns a tracer, which ``check``'s eager branch cannot read)."""
-    if is_traced(x):
-        return check(x, name, **kw)
-    with jax.ensure_compile_time_eval():
-        return check(x, name, **kw)
+_chk = check  # check() validates Python constants eagerly, also inside jit
 
 
 DELTA_CCA = 0.95  # A ∝ m^delta for cluster-cluster aggregation (Ossenkopf; Kempf+99; Paszun & Dominik)

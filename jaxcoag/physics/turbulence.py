@@ -38,7 +38,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from .._validate import check, is_traced
+from .._validate import check
 from .safe import clamp_st, safe_sqrt
 
 __all__ = [
@@ -76,12 +76,7 @@ def _check_method(method: str) -> None:
                          "('exact': root of eq. 3.21, 'ya': t* = y_a tau_f, 'ch03': k*/k_L = 1 + St^-3/2/2).")
 
 
-def _check(x, name, **kw):
-    """``check`` that also works for concrete (Python/NumPy) arguments used inside a jit trace."""
-    if is_traced(x):
-        return check(x, name, **kw)
-    with jax.ensure_compile_time_eval():
-        return check(x, name, **kw)
+_check = check  # check() validates Python constants eagerly, also inside jit
 
 
 def _float_arrays(*xs):

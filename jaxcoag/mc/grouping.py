@@ -1,0 +1,168 @@
+"""Grouping: zoom methods, (de)magnification and merging of species.
+
+A species of multiplicity g is simulated as w groups of 2^z particles, g = w 2^z (eq. 5.8).
+The zoom method only decides z; ``apply_zoom`` caps it so that w ≥ 1 and adjusts w exactly
+(``ldexp``), ``demagnify`` restores w ≥ 1 after a donor lost groups, ``merge_pairs`` is the
+smoothing safety valve that keeps the species count below the capacity.
+
+References: Ormel (2008) thesis §5.2.1 (limiting Ns: merging), §5.2.3-5.2.4 (zoom methods,
+(de)magnification), eq. (5.8), (5.14); spec/montecarlo.md §2.4, §2.5, §2.7, §3.6, §8.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["zoom_target_equal_mass", "zoom_target_distribution", "distribution_nodes",
+           "apply_zoom", "demagnify", "merge_pairs", "log_g"]
+
+LN2 = 0.6931471805599453
+
+
+def log_g(w, z):
+    """ln g = ln w + z ln 2 (−inf for w = 0)."""
+    pos = w > 0
+    return jnp.where(pos, jnp.log(jnp.where(pos, w, 1.0)), -jnp.inf) + z.astype(w.dtype) * LN2
+
+
+def zoom_target_equal_mass(logm, log_mstar):
+    """Equal-mass zoom target ẑ = max(0, ⌊log2(m*/m)⌋) (group mass in (m*/2, m*]).
+
+    Arguments: logm: ln particle mass [ln g]; log_mstar: ln m* [ln g].
+    Returns: int32 target zoom.
+    References: Ormel (2008) eq. (5.14); spec/montecarlo.md §2.5, §8 (rounding).
+    """
+    return jnp.maximum(jnp.floor((log_mstar - logm) / LN2 + 1e-9), 0.0).astype(jnp.int32)
+
+
+def distribution_nodes(logm, w, z, valid, log_mlo, log_ng_target, n_bins: int):
+    """Nodes (x_p = ln m, f_p = zoom) of the distribution-method zoom function.
+
+    Log-spaced bins between m_lo and the largest mass M_L1 (width ≥ ln 2), particle
+    occupancy N_k per bin, target G = Ng*/N_occ groups per occupied bin, bin zoom
+    max(0, log2(N_k/G)); the function is the cumulative minimum (non-increasing in m) of the
+    occupied-bin values, piecewise linear in ln m, flat outside.
+
+    Returns: (xp, fp), each (n_bins,), for ``jnp.interp``.
+    References: Ormel (2008) §5.2.3 (distribution method); spec/montecarlo.md §2.5 steps 1-4.
+    """
+    lmax = jnp.max(jnp.where(valid, logm, -jnp.inf))
+    lmax = jnp.where(jnp.isfinite(lmax), lmax, log_mlo)
+    width = jnp.maximum((lmax - log_mlo) / n_bins, LN2)
+    b = jnp.clip(jnp.floor((logm - log_mlo) / width), 0, n_bins - 1).astype(jnp.int32)
+    lg = jnp.where(valid, log_g(w, z), -jnp.inf)
+    bmax = jax.ops.segment_max(lg, b, num_segments=n_bins)
+    occ = jax.ops.segment_sum(valid.astype(jnp.int32), b, num_segments=n_bins) > 0
+    bmax_safe = jnp.where(occ, bmax, 0.0)
+    ssum = jax.ops.segment_sum(jnp.where(valid, jnp.exp(lg - bmax_safe[b]), 0.0), b, num_segments=n_bins)
+    logN = jnp.where(occ, bmax_safe + jnp.log(jnp.where(occ, ssum, 1.0)), -jnp.inf)
+    n_occ = jnp.maximum(jnp.sum(occ), 1)
+    logG = log_ng_target - jnp.log(n_occ.astype(logm.dtype))
+    zb = jnp.maximum((logN - logG) / LN2, 0.0)
+    centres = log_mlo + (jnp.arange(n_bins) + 0.5) * width
+    fake = lmax + 1e3 + jnp.arange(n_bins)
+    xkey = jnp.where(occ, centres, fake)
+    order = jnp.argsort(xkey, stable=True)
+    xp = xkey[order]
+    fp = jnp.where(occ, zb, 1e4)[order]
+    fp = jax.lax.cummin(fp)
+    return xp, fp
+
+
+def zoom_target_distribution(logm, xp, fp):
+    """Distribution-method zoom target ⌊z(m)⌋ from the nodes of :func:`distribution_nodes`.
+
+    References: spec/montecarlo.md §2.5 step 5.
+    """
+    return jnp.maximum(jnp.floor(jnp.interp(logm, xp, fp)), 0.0).astype(jnp.int32)
+
+
+def apply_zoom(w, z, zhat):
+    """Set z = clip(ẑ, 0, ⌊log2 g⌋) and w = g / 2^z exactly (g = w 2^z unchanged).
+
+    Arguments: w (float), z (int), zhat (int target). Works elementwise; for w < 1 (only
+    possible at z = 0 with non-integer multiplicities) the species stays at z = 0.
+    Returns: (w_new, z_new).
+    References: spec/montecarlo.md §2.4 (vectorised (de)magnification).
+    """
+    _, e = jnp.frexp(jnp.where(w > 0, w, 1.0))
+    cap = z + (e - 1)
+    z_new = jnp.clip(zhat, 0, jnp.maximum(cap, 0)).astype(jnp.int32)
+    z_new = jnp.where(w > 0, z_new, z)
+    w_new = jnp.ldexp(w, z - z_new)
+    return w_new, z_new
+
+
+def demagnify(w, z, tol=1e-9):
+    """Donor fix-up: remove (w → 0) if g ≤ tol, else halve groups until w ≥ 1 (closed form).
+
+    Returns: (w, z, alive). A species reaching z = 0 with w < 1 (non-integer multiplicity
+    from fragmentation or merging) stays alive with that w.
+    References: Ormel (2008) §5.2.3-5.2.4, App. 5.B step 5.2; spec/montecarlo.md §2.3 step 4,
+    §3.6 (frexp closed form), §6 items 2-3.
+    """
+    alive = w > jnp.ldexp(jnp.full_like(w, tol), -z)
+    _, e = jnp.frexp(jnp.where(alive, w, 1.0))
+    k = jnp.clip(1 - e, 0, z)
+    w_new = jnp.where(alive, jnp.ldexp(w, k), 0.0)
+    z_new = jnp.where(alive, z - k, 0)
+    return w_new, z_new.astype(jnp.int32), alive
+
+
+def merge_pairs(m, logm, psi, w, z, valid, n_merge, p_protect: int, weighting: str = "mass"):
+    """Merge up to ``n_merge`` disjoint pairs of mass-neighbouring species.
+
+    Species are sorted by mass; candidate pairs are (2p, 2p+1) in that order (disjoint by
+    construction) among the unprotected species (the ``p_protect`` most massive are never
+    merged); the ``n_merge`` pairs closest in ln m (more on exact ties) merge into the lighter slot with
+    g = g_a + g_b, m = (g_a m_a + g_b m_b)/g (mass conserved, no rounding) and psi averaged
+    with ``weighting`` ∈ {"number" (thesis formula), "mass", "volume" (= mass here, for a
+    common material density)}. The merged species keeps the smaller zoom of the two, then w
+    is set to g/2^z (the caller rezooms).
+
+    Returns: (m, logm, psi, w, z, valid, n_done).
+    References: Ormel (2008) §5.2.1 "Limiting Ns", App. 5.B 6.3; spec/montecarlo.md §2.7, §8.
+    """
+    S = m.shape[0]
+    key = jnp.where(valid, logm, jnp.inf)
+    order = jnp.argsort(key, stable=True)
+    ns = jnp.sum(valid)
+    rank = jnp.arange(S)
+    unprot = (rank < ns - p_protect) & valid[order]
+    P = S // 2
+    A = order[0:2 * P:2]
+    B = order[1:2 * P:2]
+    okp = unprot[0:2 * P:2] & unprot[1:2 * P:2]
+    d = jnp.where(okp, logm[B] - logm[A], jnp.inf)
+    thr = jnp.sort(d)[jnp.clip(n_merge - 1, 0, P - 1)]
+    sel = okp & (d <= thr) & (n_merge > 0)
+    lgA = log_g(w[A], z[A])
+    lgB = log_g(w[B], z[B])
+    lg = jnp.logaddexp(lgA, lgB)
+    pA = jnp.exp(lgA - lg)
+    pB = jnp.exp(lgB - lg)
+    m_new = pA * m[A] + pB * m[B]
+    logm_new = jnp.log(m_new)
+    if weighting == "number":
+        qA, qB = pA, pB
+    elif weighting in ("mass", "volume"):
+        qA = pA * m[A] / m_new
+        qB = pB * m[B] / m_new
+    else:  # pragma: no cover - validated at run()
+        raise ValueError(f"unknown merge_weighting {weighting!r}")
+    psi_new = qA[:, None] * psi[A] + qB[:, None] * psi[B]
+    z_new = jnp.minimum(z[A], z[B])
+    w_new = jnp.exp(lg - z_new.astype(lg.dtype) * LN2)
+    selc = sel[:, None]
+    m = m.at[A].set(jnp.where(sel, m_new, m[A]))
+    logm = logm.at[A].set(jnp.where(sel, logm_new, logm[A]))
+    psi = psi.at[A].set(jnp.where(selc, psi_new, psi[A]))
+    w = w.at[A].set(jnp.where(sel, w_new, w[A]))
+    z = z.at[A].set(jnp.where(sel, z_new, z[A]))
+    valid = valid.at[B].set(jnp.where(sel, False, valid[B]))
+    w = w.at[B].set(jnp.where(sel, 0.0, w[B]))
+    z = z.at[B].set(jnp.where(sel, 0, z[B]))
+    m = m.at[B].set(jnp.where(sel, 1.0, m[B]))
+    logm = logm.at[B].set(jnp.where(sel, 0.0, logm[B]))
+    return m, logm, psi, w, z, valid, jnp.sum(sel)

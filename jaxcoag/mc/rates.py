@@ -1,0 +1,127 @@
+"""Grouped collision rates in log space (volume-free, symmetric storage).
+
+The symmetric volume-free matrix is ``Λ'_ab = ½ λ^G_ab V`` (a ≠ b) and ``Λ'_aa = λ^G_aa V``
+with (eq. 5.31 and the z = 0 correction of spec §2.2)
+
+    λ^G_ab = w_a w_b 2^{min(z_a, z_b) + N_eps(a, b)} C_ab                (a ≠ b)
+    λ^G_aa = w_a (w_a 2^{z_a} − 1) C_aa      (z_a ≥ 1, in-group collapse)
+    λ^G_aa = ½ w_a (w_a − 1) C_aa            (z_a = 0, species formalism eq. 5.7)
+
+with C = K/V. Everything is evaluated as logs (w up to 1e160, 2^z up to 2^1000, kernels
+spanning hundreds of decades): no product m1*m2, g_a*g_b or 2^z_a*2^z_b is ever formed.
+
+References: Ormel (2008) thesis eqs. (5.7), (5.10), (5.12), (5.13), (5.31), (5.32);
+spec/montecarlo.md §2.2, §3.4, §6 items 4-5.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["n_eps", "log_rate_row", "log_rate_matrix", "row_sums"]
+
+LN2 = 0.6931471805599453
+
+
+def n_eps(z_a, z_b, logm_a, logm_b, log2_feps, rounding: str = "ceil"):
+    """Group splitting factor N_eps of a pair (symmetric in a, b).
+
+    Arguments:
+        z_a, z_b: zoom numbers (int).
+        logm_a, logm_b: ln of the particle masses [ln g].
+        log2_feps: log2 of the maximum fractional mass gain f_eps per event.
+        rounding: "ceil" (default; Δm/m ≤ f_eps holds) or "floor" (thesis-literal truncation).
+
+    Returns:
+        int32 N_eps = clip(round(x), 0, |z_a − z_b|), with x = (z_j − z_i) + log2 m_j − log2 m_i
+        − log2 f_eps and i the lower-zoom member (N_eps = 0 for equal zooms).
+
+    References: Ormel (2008) eq. (5.12)/(5.32); spec/montecarlo.md §2.2 decisions (a)-(c), §8.
+    """
+    a_low = z_a <= z_b
+    dz = jnp.abs(z_a - z_b)
+    logm_i = jnp.where(a_low, logm_a, logm_b)
+    logm_j = jnp.where(a_low, logm_b, logm_a)
+    x = dz.astype(logm_a.dtype) + (logm_j - logm_i) / LN2 - log2_feps
+    if rounding == "ceil":
+        n = jnp.ceil(x - 1e-9)
+    elif rounding == "floor":
+        n = jnp.floor(x + 1e-9)
+    else:  # pragma: no cover - validated at run()
+        raise ValueError(f"unknown neps_rounding {rounding!r}")
+    n = jnp.clip(n, 0.0, dz.astype(x.dtype))
+    return n.astype(jnp.int32)
+
+
+def _log_kernel(kernel, logm1, logm2, psi1, psi2):
+    if psi1.shape[-1] == 0 and kernel.n_struct == 0:
+        return kernel.log_kernel_from_log_mass(logm1, logm2)
+    return kernel.log_kernel_from_log_mass(logm1, logm2, psi1, psi2)
+
+
+def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
+    """ln of row ``a`` of the volume-free symmetric rate matrix Λ' (shape (S,), -inf = 0).
+
+    Arguments:
+        kernel: an ``AbstractKernel``; a: slot index; logm [ln g], psi, w, z, valid: species
+        arrays of shape (S,) / (S, P); log2_feps: log2 f_eps; rounding: N_eps rounding.
+
+    Returns:
+        (S,) array ln Λ'_{a,b} [ln(cm^3 s^-1)] (multiply by exp(-ln V) for the event rate).
+
+    References: Ormel (2008) eqs. (5.7), (5.13), (5.31); spec/montecarlo.md §2.2, §3.4.
+    """
+    S = logm.shape[0]
+    la = jnp.broadcast_to(logm[a], (S,))
+    pa = jnp.broadcast_to(psi[a], psi.shape)
+    logK = _log_kernel(kernel, la, logm, pa, psi)
+    za = jnp.broadcast_to(z[a], (S,))
+    ne = n_eps(za, z, la, logm, log2_feps, rounding)
+    wpos = w > 0
+    lw = jnp.where(wpos, jnp.log(jnp.where(wpos, w, 1.0)), -jnp.inf)
+    lwa = lw[a]
+    zmin = jnp.minimum(za, z)
+    off = lwa + lw + (zmin + ne).astype(logm.dtype) * LN2 + logK - LN2
+    # diagonal
+    wa, zaa = w[a], z[a]
+    lg = lwa + zaa.astype(logm.dtype) * LN2
+    # z >= 1: w (g - 1), with g >= 2
+    gm1_pos = lg > 1e-12
+    log_gm1 = jnp.where(gm1_pos, lg + jnp.log(-jnp.expm1(-jnp.where(gm1_pos, lg, 1.0))), -jnp.inf)
+    d_grouped = lwa + log_gm1
+    wm1 = wa - 1.0
+    d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2, -jnp.inf)
+    diag = jnp.where(zaa >= 1, d_grouped, d_single) + logK[a]
+    idx = jnp.arange(S)
+    row = jnp.where(idx == a, diag, off)
+    ok = valid & valid[a]
+    return jnp.where(ok, row, -jnp.inf)
+
+
+def log_rate_matrix(kernel, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
+    """Full (S, S) matrix ln Λ' (rows of :func:`log_rate_row`); O(S^2) memory and work.
+
+    References: spec/montecarlo.md §3.4 design A.
+    """
+    S = logm.shape[0]
+    return jax.vmap(lambda a: log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding))(
+        jnp.arange(S))
+
+
+def row_sums(L):
+    """Scaled row sums of a log-rate matrix: returns (R, s) with R_a exp(s) = Σ_b exp(L_ab).
+
+    The scale s = max_a ln R_a keeps the largest row sum at 1 (rates of 1e300 and 1e-300 can
+    coexist; rows below exp(s - 745) underflow to 0 and are re-derived on the next refresh).
+
+    References: spec/montecarlo.md §3.4 ("scale by the max before exponentiating").
+    """
+    rlog = jax.nn.logsumexp(L, axis=1)
+    rlog = jnp.where(jnp.isnan(rlog), jnp.nan, rlog)
+    s = jnp.max(jnp.where(jnp.isfinite(rlog) | jnp.isnan(rlog), rlog, -jnp.inf))
+    s_ok = jnp.isfinite(s)
+    s = jnp.where(s_ok, s, 0.0)
+    R = jnp.exp(rlog - s)
+    R = jnp.where(jnp.isnan(rlog) | (rlog == jnp.inf), jnp.nan, R)
+    return R, s

@@ -1,0 +1,220 @@
+"""Deterministic unit tests of the grouped Monte Carlo building blocks (spec/montecarlo.md §4.8)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxcoag import kernels as K
+from jaxcoag import mc
+from jaxcoag._validate import JaxcoagInputError
+from jaxcoag.mc import grouping as G
+from jaxcoag.mc.rates import log_rate_matrix as _lrm, log_rate_row as _lrr, n_eps, row_sums
+
+log_rate_matrix = jax.jit(_lrm, static_argnames=('rounding',))
+log_rate_row = jax.jit(_lrr, static_argnames=('rounding',))
+
+LN2 = np.log(2.0)
+
+
+@pytest.mark.parametrize("zi,mi,zj,mj,expect_ceil,expect_floor", [
+    (0, 1e6, 30, 1.0, 24, 23),   # spec §2.2 worked example: x = 23.36
+    (5, 10.0, 6, 1.0, 1, 1),     # x = 10.97 capped at z_j - z_i = 1
+    (0, 1e10, 2, 1.0, 0, 0),     # x < 0 -> 0
+    (7, 3.0, 7, 5.0, 0, 0),      # equal zooms -> 0
+])
+def test_n_eps_table(zi, mi, zj, mj, expect_ceil, expect_floor):
+    args = (jnp.int32(zi), jnp.int32(zj), jnp.log(mi), jnp.log(mj), jnp.log2(1e-4))
+    assert int(n_eps(*args, rounding="ceil")) == expect_ceil
+    assert int(n_eps(*args, rounding="floor")) == expect_floor
+    # symmetric in (a, b)
+    args_sw = (jnp.int32(zj), jnp.int32(zi), jnp.log(mj), jnp.log(mi), jnp.log2(1e-4))
+    assert int(n_eps(*args_sw, rounding="ceil")) == expect_ceil
+    if (zi, zj) == (0, 30):
+        # Δm/m = n_c m_j / m_i = 2^(30-24)/1e6 = 6.4e-5 <= f_eps (spec example)
+        assert 2.0 ** (30 - expect_ceil) * mj / mi == pytest.approx(6.4e-5)
+
+
+def _state():
+    logm = jnp.log(jnp.array([1.0, 1e6, 3.0, 2.0, 1.0]))
+    psi = jnp.zeros((5, 0))
+    w = jnp.array([5.0, 1.0, 1.5, 7.0, 0.0])
+    z = jnp.array([0, 0, 3, 30, 0], jnp.int32)
+    valid = jnp.array([True, True, True, True, False])
+    return logm, psi, w, z, valid
+
+
+def test_rate_formulas_and_symmetry():
+    logm, psi, w, z, valid = _state()
+    ker = K.Sum(0.5)
+    log2f = jnp.log2(1e-3)
+    L = np.asarray(log_rate_matrix(ker, logm, psi, w, z, valid, log2f))
+    m = np.exp(np.asarray(logm))
+    Kf = lambda a, b: 0.5 * (m[a] + m[b])
+    # symmetry
+    fin = np.isfinite(L)
+    assert np.array_equal(fin, fin.T)
+    np.testing.assert_allclose(L[fin], L.T[fin], rtol=1e-13)
+    # z = 0 same-species: ½ w (w-1) C  (volume-free)
+    assert np.exp(L[0, 0]) == pytest.approx(0.5 * 5 * 4 * Kf(0, 0), rel=1e-13)
+    # w = 1, z = 0: no self collisions
+    assert L[1, 1] == -np.inf
+    # in-group, z >= 1: w (w 2^z - 1) C
+    assert np.exp(L[2, 2]) == pytest.approx(1.5 * (1.5 * 8 - 1) * Kf(2, 2), rel=1e-13)
+    # out-of-group: ½ w_a w_b 2^(min z + N_eps) C (symmetric storage), N_eps from (5.12)
+    ne = int(n_eps(z[0], z[3], logm[0], logm[3], log2f))
+    assert ne == min(30, int(np.ceil(30 + np.log2(2.0 / 1.0) - np.log2(1e-3) - 1e-9)))
+    assert np.exp(L[0, 3]) == pytest.approx(0.5 * 5 * 7 * 2.0 ** (0 + ne) * Kf(0, 3), rel=1e-12)
+    ne23 = int(n_eps(z[2], z[3], logm[2], logm[3], log2f))
+    assert np.exp(L[2, 3]) == pytest.approx(0.5 * 1.5 * 7 * 2.0 ** (3 + ne23) * Kf(2, 3), rel=1e-12)
+    # invalid slot has zero rates
+    assert np.all(L[4] == -np.inf) and np.all(L[:, 4] == -np.inf)
+    # rows equal the matrix; scaled row sums reproduce Σ_b Λ'_ab
+    row = np.asarray(log_rate_row(ker, 2, logm, psi, w, z, valid, log2f))
+    np.testing.assert_array_equal(row, L[2])
+    R, s = row_sums(jnp.asarray(L))
+    np.testing.assert_allclose(np.asarray(R) * np.exp(float(s)), np.exp(L).sum(1), rtol=1e-13)
+
+
+def test_all_z0_reduces_to_species_formalism():
+    """U3: with all z = 0 the grouped rates are the species rates of eq. (5.7)."""
+    m = jnp.array([1.0, 2.0, 5.0])
+    w = jnp.array([4.0, 3.0, 1.0])
+    z = jnp.zeros(3, jnp.int32)
+    L = np.asarray(log_rate_matrix(K.Constant(2.0), jnp.log(m), jnp.zeros((3, 0)), w, z, jnp.ones(3, bool),
+                                   jnp.log2(1e-3)))
+    g = np.asarray(w)
+    lam = np.where(np.eye(3, dtype=bool), 0.5 * g * (g - 1) * 2.0, 0.5 * np.outer(g, g) * 2.0)
+    np.testing.assert_allclose(np.exp(L), lam, rtol=1e-13)
+
+
+def test_huge_dynamic_range_rates_finite():
+    """Rates for w ~ 1e160, z ~ 500 and kernels of 1e300 stay finite in log space."""
+    logm = jnp.log(jnp.array([1.0, 1e150]))
+    w = jnp.array([1e4, 1.0])
+    z = jnp.array([500, 0], jnp.int32)
+    L = np.asarray(log_rate_matrix(K.PowerProduct(1.0, 2.0), logm, jnp.zeros((2, 0)), w, z,
+                                   jnp.ones(2, bool), jnp.log2(1e-3)))
+    assert np.isfinite(L[0, 0]) and np.isfinite(L[0, 1]) and L[1, 1] == -np.inf  # single body: no self rate
+    # off-diagonal: ln(½ w_a w_b 2^(0 + N_eps) K) with K = (1e150)^2, N_eps = 500 - ... capped
+    ne = int(n_eps(jnp.int32(500), jnp.int32(0), logm[0], logm[1], jnp.log2(1e-3)))
+    expect = np.log(0.5 * 1e4) + ne * LN2 + 2.0 * np.log(1e150)
+    assert L[0, 1] == pytest.approx(expect, rel=1e-13) and L[0, 1] > 700  # K alone would be 1e300
+
+
+def test_demagnify_fixup_cases():
+    """U7: w = 1 - 2^-7 -> one demagnification... (closed form), w = 0 -> removed."""
+    w, z, alive = G.demagnify(jnp.array([1 - 2.0 ** -7, 0.0, 0.25, 3.0]), jnp.array([4, 2, 5, 1], jnp.int32))
+    np.testing.assert_array_equal(np.asarray(alive), [True, False, True, True])
+    np.testing.assert_array_equal(np.asarray(z), [3, 0, 3, 1])
+    np.testing.assert_array_equal(np.asarray(w), [2 * (1 - 2.0 ** -7), 0.0, 1.0, 3.0])
+    # g = w 2^z unchanged for live species
+    g0 = np.array([(1 - 2.0 ** -7) * 16, 0.25 * 32, 6.0])
+    np.testing.assert_array_equal(np.asarray(w)[[0, 2, 3]] * 2.0 ** np.asarray(z)[[0, 2, 3]], g0)
+
+
+def test_apply_zoom_exact():
+    w, z = G.apply_zoom(jnp.array([1000.0, 3.0, 1.5]), jnp.array([0, 2, 0], jnp.int32), jnp.array([5, 10, 3], jnp.int32))
+    # 1000 -> z=5, w=31.25 ; 3*4=12 -> cap floor(log2 12)=3 -> w=1.5 ; 1.5 -> cap 0
+    np.testing.assert_array_equal(np.asarray(z), [5, 3, 0])
+    np.testing.assert_array_equal(np.asarray(w), [31.25, 1.5, 1.5])
+    zh = G.zoom_target_equal_mass(jnp.log(jnp.array([1.0, 3.0, 1e6, 2e6])), jnp.log(1e6))
+    np.testing.assert_array_equal(np.asarray(zh), [19, 18, 0, 0])
+
+
+def test_merge_conserves_number_mass_and_protects():
+    """U8: merging conserves g and mass, mass-weights psi, never touches the heaviest."""
+    m = jnp.array([1.0, 1.1, 5.0, 5.2, 100.0, 1.0])
+    psi = jnp.array([[1.0], [2.0], [1.0], [3.0], [7.0], [0.0]])
+    w = jnp.array([3.0, 2.0, 1.0, 1.0, 1.0, 0.0])
+    z = jnp.array([2, 1, 0, 0, 0, 0], jnp.int32)
+    valid = jnp.array([True, True, True, True, True, False])
+    g0 = np.asarray(w * 2.0 ** z)
+    out = jax.jit(G.merge_pairs, static_argnums=(7, 8))(m, jnp.log(m), psi, w, z, valid, jnp.int32(5), 1, "mass")
+    m2, lm2, psi2, w2, z2, v2, nd = out
+    g2 = np.where(np.asarray(v2), np.asarray(w2) * 2.0 ** np.asarray(z2), 0)
+    assert int(nd) == 2 and int(np.sum(v2)) == 3
+    assert g2.sum() == pytest.approx(g0[:5].sum(), rel=1e-14)
+    assert (g2 * np.asarray(m2)).sum() == pytest.approx((g0 * np.asarray(m))[:5].sum(), rel=1e-14)
+    # protected heaviest species untouched
+    assert bool(v2[4]) and float(m2[4]) == 100.0
+    # mass-weighted psi of the (1.0, 1.1) pair: g = 12 and 4
+    expect = (12 * 1.0 * 1.0 + 4 * 1.1 * 2.0) / (12 * 1.0 + 4 * 1.1)
+    assert float(psi2[0, 0]) == pytest.approx(expect, rel=1e-14)
+
+
+def test_run_input_validation():
+    t = jnp.array([0.0, 1.0])
+    key = jax.random.key(0)
+    kc = K.Constant(1.0)
+    with pytest.raises(JaxcoagInputError, match="n_particles"):
+        mc.run(kc, n_particles=-5, t_out=t, key=key)
+    with pytest.raises(JaxcoagInputError, match="m0"):
+        mc.run(kc, n_particles=10, m0=0.0, t_out=t, key=key)
+    with pytest.raises(JaxcoagInputError, match="rho_d"):
+        mc.run(kc, n_particles=10, rho_d=-1.0, t_out=t, key=key)
+    with pytest.raises(JaxcoagInputError, match="strictly increasing"):
+        mc.run(kc, n_particles=10, t_out=jnp.array([0.0, 2.0, 1.0]), key=key)
+    with pytest.raises(JaxcoagInputError, match="mode"):
+        mc.run(kc, n_particles=10, t_out=t, key=key, mode="constant_volume")
+    with pytest.raises(JaxcoagInputError, match="grouping"):
+        mc.run(kc, n_particles=10, t_out=t, key=key, grouping="equalmass")
+    with pytest.raises(JaxcoagInputError, match="2\\^53"):
+        mc.run(kc, n_particles=1e30, t_out=t, key=key)
+    with pytest.raises(JaxcoagInputError, match="1e300"):
+        mc.run(kc, n_particles=1e200, m0=1e120, t_out=t, key=key, grouping="equal_mass")
+
+
+def test_status_names():
+    assert mc.status_names(0) == []
+    assert mc.status_names(mc.STATUS.CAPACITY | mc.STATUS.MAX_EVENTS) == ["CAPACITY", "MAX_EVENTS"]
+
+
+def _collide_jit(*args):
+    import sys
+
+    import equinox as eqx
+    return eqx.filter_jit(sys.modules["jaxcoag.mc.run"]._collide)(*args)
+
+
+def _hand_state(m, w, z):
+    import sys
+    from jaxcoag.mc.state import MCState
+    S = 6
+    n = len(m)
+    mm = jnp.ones(S).at[:n].set(jnp.asarray(m, float))
+    st = MCState(m=mm, logm=jnp.log(mm), psi=jnp.zeros((S, 0)),
+                 w=jnp.zeros(S).at[:n].set(jnp.asarray(w, float)),
+                 z=jnp.zeros(S, jnp.int32).at[:n].set(jnp.asarray(z, jnp.int32)),
+                 valid=jnp.arange(S) < n, R=jnp.zeros(S), s=jnp.array(0.0), logV=jnp.array(0.0),
+                 M_tot=jnp.array(1.0), t=jnp.array(0.0), n_events=jnp.array(0), n_since_refresh=jnp.array(0),
+                 dirty=jnp.array(False), rezoom=jnp.array(False), log_mstar=jnp.array(0.0), zref=jnp.array(0.0),
+                 zoom_xp=jnp.arange(3.0), zoom_fp=jnp.zeros(3), key=jax.random.key(0), k_out=jnp.array(0),
+                 status=jnp.array(0), done=jnp.array(False), n_dup=jnp.array(0), n_merge=jnp.array(0), snaps=None)
+    R = sys.modules["jaxcoag.mc.run"]
+    cfg = R._Cfg(mode="const_v", grouping=None, capacity=S, n_snap=1, n_struct=0, n_prod=1, rates="full",
+                 n_refresh=1, rounding="ceil", controller="species", d_max=1, d_up=1, n_bins=3, p_protect=0,
+                 weighting="mass", dedupe=True, n_rezoom=1)
+    p = dict(outcome=mc.PerfectSticking(), log2_feps=jnp.log2(1.0))
+    return R, cfg, p, st
+
+
+def test_event_execution_fig52a_and_in_group_fixup():
+    """Fig. 5.2a: z_i = 1, z_j = 3, N_eps = 0 -> 2 products of mass m_i + 4 m_j; U7 in-group:
+    w = 1.5, z = 3 -> donor z = 2, w = 1 and a product of g = 4, mass 2m."""
+    R, cfg, p, st = _hand_state([10.0, 1.0], [1.0, 1.0], [1, 3])
+    out, T, Tm = _collide_jit(cfg, p, st, jnp.int32(1), jnp.int32(0), jax.random.key(0))
+    v = np.asarray(out.valid)
+    assert v.sum() == 1
+    k = int(np.argmax(v))
+    assert float(out.m[k]) == 14.0 and float(out.w[k]) * 2.0 ** int(out.z[k]) == 2.0
+    # mass: 2*10 + 8*1 = 28 = 2 * 14
+    R, cfg, p, st = _hand_state([5.0], [1.5], [3])
+    out, T, Tm = _collide_jit(cfg, p, st, jnp.int32(0), jnp.int32(0), jax.random.key(0))
+    assert int(out.z[0]) == 2 and float(out.w[0]) == 1.0 and float(out.m[0]) == 5.0
+    k = int(np.flatnonzero(np.asarray(out.valid))[1])
+    assert float(out.m[k]) == 10.0 and float(out.w[k]) * 2.0 ** int(out.z[k]) == 4.0
+    # z = 0 same species consumes two groups (species formalism)
+    R, cfg, p, st = _hand_state([3.0], [5.0], [0])
+    out, T, Tm = _collide_jit(cfg, p, st, jnp.int32(0), jnp.int32(0), jax.random.key(0))
+    assert float(out.w[0]) == 3.0 and int(np.sum(out.valid)) == 2
