@@ -27,6 +27,12 @@ def _log_edges(edges):
     return np.log(e)
 
 
+def _row(v, like):
+    """Reshape a per-bin vector (nbins,) to broadcast explicitly against ``like`` (..., nbins)."""
+    v = jnp.asarray(v)
+    return v.reshape((1,) * (jnp.ndim(like) - 1) + v.shape)
+
+
 def bin_centers(edges):
     """Geometric bin centers sqrt(m_lo m_hi) [g] from edges [g] (or a MassGrid)."""
     le = _log_edges(edges)
@@ -45,8 +51,9 @@ def moment(rho, edges, p):
     """
     le = _log_edges(edges)
     lc = 0.5 * (le[:-1] + le[1:])
+    rho = jnp.asarray(rho)
     w = jnp.exp((p - 1.0) * jnp.asarray(lc))
-    return jnp.sum(jnp.asarray(rho) * w, axis=-1)
+    return jnp.sum(rho * _row(w, rho), axis=-1)
 
 
 def moments(rho, edges, ps=(0, 1, 2)):
@@ -77,7 +84,8 @@ def mass_peak(rho, edges):
     le = _log_edges(edges)
     lc = jnp.asarray(0.5 * (le[:-1] + le[1:]))
     dl = jnp.asarray(np.diff(le))
-    y = jnp.asarray(rho) / dl
+    rho = jnp.asarray(rho)
+    y = rho / _row(dl, rho)
     i = jnp.argmax(y, axis=-1)
     n = y.shape[-1]
     im, ip = jnp.clip(i - 1, 0, n - 1), jnp.clip(i + 1, 0, n - 1)
@@ -97,4 +105,5 @@ def m2f(rho, edges):
     References: Ormel (2008) thesis Figs. 5.3-5.9.
     """
     le = _log_edges(edges)
-    return jnp.asarray(rho) / jnp.asarray(np.diff(le))
+    rho = jnp.asarray(rho)
+    return rho / _row(np.diff(le), rho)

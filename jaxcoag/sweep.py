@@ -1,0 +1,308 @@
+"""Parameter sweeps: vmap a model over a parameter grid, optionally sharded over devices.
+
+``sweep(fn, {"alpha": alphas, "rho_g": rhos})`` evaluates ``fn(alpha=a, rho_g=r)`` for every
+point of the outer product (``grid="outer"``) or for matched tuples (``grid="zip"``) in ONE
+compiled, vmapped program and returns an ``xarray.Dataset`` labelled by the parameters, with
+a ``status`` per member. ``fn`` typically builds a kernel from its arguments and calls
+``solve_binned(..., throw=False)``; it may return
+
+* a :class:`~jaxcoag.binned.BinnedSolution` - the dataset then holds ``mass_per_bin``
+  [g cm^-3] and ``number_per_bin`` [cm^-3] (params..., time, mass), ``gel_mass``,
+  ``mass_drift``, ``steps`` and ``status`` = the solution's RESULTS code;
+* a dict of arrays (or one array, named ``value``); an optional entry ``"result"`` holding
+  a RESULTS item (e.g. ``sol.result``) gives the status, otherwise a member's status is
+  ``nonfinite`` when any of its outputs is NaN/inf and ``successful`` otherwise.
+
+**Failures are values.** Solve with ``throw=False``: a member that hits ``max_steps`` or goes
+non-finite gets that status while the others finish normally. (With ``throw=True`` inside a
+vmapped sweep one failure raises for the whole batch, since ``eqx.error_if`` fires on any
+member.) All members of one vmapped batch step together until the slowest finishes, so
+``chunk=`` (``jax.lax.map`` with ``batch_size``) bounds memory and limits the cost of a slow
+member to its chunk.
+
+**Sharding (one host).** With ``mesh=`` (a ``jax.sharding.Mesh``; the member axis is split
+over all its axes) or ``devices=`` (a list of devices, one mesh axis ``"members"``) the
+flattened members are padded to a multiple of the device count, placed with
+``NamedSharding(mesh, PartitionSpec(axes))`` and run with ``jax.shard_map``: every device
+integrates its own block (its own adaptive step loop), results are gathered and the padding
+dropped. Results equal the unsharded sweep. On a CPU-only machine, emulate devices with
+``XLA_FLAGS=--xla_force_host_platform_device_count=4`` set *before* JAX initialises.
+
+**Multi-host (jax.distributed).** On a cluster start every process with the same script and
+call, before anything else touches JAX::
+
+    import jax
+    jax.distributed.initialize(coordinator_address="host0:1234",   # SLURM/TPU: no arguments needed
+                               num_processes=P, process_id=i)
+    jax.config.update("jax_enable_x64", True)
+    mesh = jax.make_mesh((jax.device_count(),), ("members",))     # spans all hosts' devices
+    ds = jaxcoag.sweep.sweep(fn, params, mesh=mesh)
+
+Every process passes the *same* parameter arrays; ``jax.device_count()`` is the global count
+and each process's devices integrate their share of the members. The gathered result is
+fetched with ``jax.experimental.multihost_utils.process_allgather`` so every process returns
+the full dataset; write it from process 0 only
+(``if jax.process_index() == 0: jaxcoag.io.save_netcdf(ds, path)``).
+
+References: JAX docs "Distributed arrays and automatic parallelization", "Manual parallelism
+with shard_map", "Multi-host and multi-process environments"; DESIGN.md §2 (failures are
+values).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import jax
+import jax.numpy as jnp
+
+from ._validate import JaxcoagInputError, require_x64
+
+__all__ = ["sweep", "parameter_points"]
+
+_GRIDS = ("outer", "zip")
+
+
+def _check_params(params):
+    if not isinstance(params, dict) or not params:
+        raise JaxcoagInputError("params must be a non-empty dict name -> 1-D array of values, "
+                                "e.g. {'alpha': np.logspace(-5, -3, 32)}.")
+    out = {}
+    for k, v in params.items():
+        if not isinstance(k, str) or not k.isidentifier():
+            raise JaxcoagInputError(f"parameter names must be Python identifiers (keyword arguments of fn); got {k!r}.")
+        a = np.asarray(v, dtype=np.float64)
+        if a.ndim != 1:
+            raise JaxcoagInputError(f"parameter {k!r} must be a 1-D array of values; got shape {a.shape}.")
+        if a.size == 0:
+            raise JaxcoagInputError(f"parameter {k!r} is empty: give at least one value.")
+        if not np.all(np.isfinite(a)):
+            raise JaxcoagInputError(f"parameter {k!r} contains NaN/inf at index {int(np.argmin(np.isfinite(a)))}; "
+                                    "pass finite values.")
+        out[k] = a
+    return out
+
+
+def parameter_points(params, grid="outer"):
+    """Flattened parameter points of a sweep.
+
+    Arguments: params: dict name -> 1-D array; grid: "outer" (all combinations, first key
+    slowest, C order) or "zip" (matched tuples, equal lengths).
+    Returns: (dict name -> 1-D array of length N, shape of the member axes).
+    """
+    params = _check_params(params)
+    if grid not in _GRIDS:
+        raise JaxcoagInputError(f"grid must be one of {_GRIDS} (got {grid!r}).")
+    if grid == "zip":
+        lens = {k: v.size for k, v in params.items()}
+        if len(set(lens.values())) != 1:
+            raise JaxcoagInputError(f"grid='zip' needs equal-length parameter arrays; got lengths {lens}.")
+        return dict(params), (next(iter(lens.values())),)
+    shape = tuple(v.size for v in params.values())
+    mesh = np.meshgrid(*params.values(), indexing="ij")
+    return {k: m.ravel() for k, m in zip(params, mesh)}, shape
+
+
+def _is_solution(x):
+    from .binned import BinnedSolution
+    return isinstance(x, BinnedSolution)
+
+
+def _is_result(x):
+    from .binned import RESULTS
+    return isinstance(x, RESULTS)
+
+
+def _member_fn(fn, names, meta):
+    """fn of keyword args -> flat dict of arrays (incl. 'status' int32); records the grid in meta."""
+    from .binned import RESULTS
+
+    def one(*vals):
+        out = fn(**dict(zip(names, vals)))
+        if _is_solution(out):
+            meta["grid"] = out.grid
+            return {"mass_per_bin": out.mass_per_bin, "number_per_bin": out.number_per_bin,
+                    "gel_mass": out.gel_mass, "mass_drift": out.mass_drift, "t": out.ts,
+                    "steps": jnp.asarray(out.stats["steps"]), "status": jnp.asarray(out.result._value, jnp.int32)}
+        if not isinstance(out, dict):
+            out = {"value": out}
+        flat, res = {}, None
+        for k, v in out.items():
+            if k == "result" and _is_result(v):
+                res = v
+                continue
+            if not isinstance(k, str) or k == "status":
+                raise JaxcoagInputError(f"fn output keys must be strings other than 'status' (got {k!r}); "
+                                        "return the RESULTS item under 'result'.")
+            v = jnp.asarray(v)
+            if not (jnp.issubdtype(v.dtype, jnp.number) or v.dtype == jnp.bool_):
+                raise JaxcoagInputError(f"fn output {k!r} must be numeric arrays.")
+            flat[k] = v
+        if res is not None:
+            status = jnp.asarray(res._value, jnp.int32)
+        else:
+            finite = jnp.array(True)
+            for v in flat.values():
+                if jnp.issubdtype(v.dtype, jnp.inexact):
+                    finite = finite & jnp.all(jnp.isfinite(v))
+            status = jnp.where(finite, RESULTS.successful._value, RESULTS.nonfinite._value).astype(jnp.int32)
+        flat["status"] = status
+        return flat
+
+    return one
+
+
+def _resolve_mesh(mesh, devices):
+    if mesh is not None and devices is not None:
+        raise JaxcoagInputError("give either mesh= or devices=, not both.")
+    if devices is not None:
+        devices = list(devices)
+        if not devices:
+            raise JaxcoagInputError("devices= is empty; pass e.g. jax.devices().")
+        mesh = jax.sharding.Mesh(np.array(devices), ("members",))
+    if mesh is not None and not isinstance(mesh, jax.sharding.Mesh):
+        raise JaxcoagInputError(f"mesh must be a jax.sharding.Mesh (got {type(mesh).__name__}).")
+    return mesh
+
+
+def _gather(x):
+    if isinstance(x, jax.Array) and not x.is_fully_addressable:  # multi-host
+        from jax.experimental import multihost_utils
+        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+    return np.asarray(x)
+
+
+@functools.lru_cache(maxsize=32)
+def _compiled(fn, names, chunk, mesh, ncols):
+    """Jitted (optionally shard_mapped) batched program for fn; cached so repeated sweeps of the
+    same function reuse the compilation. Returns (callable, meta) - meta['grid'] is filled at trace."""
+    meta = {}
+    one = _member_fn(fn, list(names), meta)
+
+    def batched(*cs):
+        if chunk is None or chunk >= cs[0].shape[0]:
+            return jax.vmap(one)(*cs)
+        return jax.lax.map(lambda c: one(*c), cs, batch_size=chunk)
+
+    if mesh is None:
+        return jax.jit(batched), meta
+    spec = jax.sharding.PartitionSpec(tuple(mesh.axis_names))
+    fsh = jax.shard_map(batched, mesh=mesh, in_specs=tuple(spec for _ in range(ncols)), out_specs=spec,
+                        check_vma=False)
+    return jax.jit(fsh), meta
+
+
+def _run(fn, names, cols, chunk, mesh):
+    """Evaluate fn over flat columns (tuple of (N,) arrays); returns (dict of (N, ...) numpy, meta)."""
+    n = cols[0].shape[0]
+    prog, meta = _compiled(fn, tuple(names), chunk, mesh, len(cols))
+    if mesh is None:
+        out = prog(*[jnp.asarray(c) for c in cols])
+        return {k: np.asarray(v) for k, v in out.items()}, meta
+    ndev = math.prod(mesh.devices.shape)
+    npad = -n % ndev
+    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(tuple(mesh.axis_names)))
+    padded = [np.concatenate([c, np.repeat(c[-1:], npad)]) if npad else c for c in cols]
+    placed = [jax.make_array_from_callback(p.shape, sharding, lambda idx, p=p: p[idx]) for p in padded]
+    out = prog(*placed)
+    return {k: _gather(v)[:n] for k, v in out.items()}, meta
+
+
+def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attrs=None):
+    """Evaluate ``fn(**point)`` over a parameter grid in one vmapped (optionally sharded) program.
+
+    Arguments:
+        fn: function of keyword arguments named as ``params`` (scalar float64 values, in the
+            units the caller chooses, e.g. alpha [-], rho_g [g cm^-3]) returning a
+            BinnedSolution, a dict of arrays (optionally with ``"result"``: a RESULTS item) or an
+            array. Must be traceable (jit/vmap); call ``solve_binned(..., throw=False)`` inside.
+        params: dict name -> 1-D array of finite values (non-empty).
+        grid: "outer" (every combination; dims = the parameter names in dict order) or "zip"
+            (matched tuples; one dim ``member`` with the parameters as coordinates on it).
+        chunk: members per vmapped batch (``jax.lax.map`` batch size); None = all at once
+            (per device when sharded).
+        mesh: ``jax.sharding.Mesh`` to shard the members over (split across all mesh axes).
+        devices: list of devices; shorthand for ``mesh=Mesh(devices, ("members",))``.
+        attrs: dict of global attributes for the dataset (scene, fixed parameters, ...).
+
+    Returns:
+        xarray.Dataset with the parameters as coordinates, the outputs as variables (extra
+        output axes named ``time``/``mass`` for solutions, ``<name>_dim<i>`` otherwise),
+        ``status`` (int32 RESULTS code, 0 = successful; attrs ``flag_values``/``flag_meanings``)
+        and attrs ``n_members``, ``n_failed``.
+
+    References: JAX ``vmap``, ``lax.map``, ``shard_map``; DESIGN.md §2 ("failures are values").
+    """
+    require_x64("jaxcoag.sweep.sweep")
+    import xarray as xr
+    from .io import result_table
+
+    if not callable(fn):
+        raise JaxcoagInputError("fn must be a callable taking the parameters as keyword arguments.")
+    if chunk is not None:
+        if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+            raise JaxcoagInputError(f"chunk must be a positive int or None (got {chunk!r}).")
+        chunk = int(chunk)
+    if attrs is not None and not isinstance(attrs, dict):
+        raise JaxcoagInputError("attrs must be a dict.")
+    mesh = _resolve_mesh(mesh, devices)
+    points, shape = parameter_points(params, grid)
+    names = list(points)
+    cols = tuple(points[k] for k in names)
+    try:
+        hash(fn)
+    except TypeError as e:
+        raise JaxcoagInputError("fn must be hashable (a function or a hashable callable object).") from e
+    out, meta = _run(fn, names, cols, chunk, mesh)
+
+    if grid == "outer":
+        pdims = tuple(names)
+        coords = {k: (k, np.asarray(params[k], np.float64)) for k in names}
+    else:
+        pdims = ("member",)
+        coords = {k: ("member", points[k]) for k in names}
+        coords["member"] = ("member", np.arange(shape[0]))
+    solution = "grid" in meta  # fn returned a BinnedSolution (recorded at trace time)
+    data = {}
+    for k, v in out.items():
+        v = v.reshape(shape + v.shape[1:])
+        if solution and k == "t":
+            continue
+        extra = v.ndim - len(shape)
+        if solution and k in ("mass_per_bin", "number_per_bin"):
+            dims = pdims + ("time", "mass")
+        elif solution and k in ("gel_mass", "mass_drift"):
+            dims = pdims + ("time",)
+        else:
+            dims = pdims + tuple(f"{k}_dim{i}" for i in range(extra))
+        data[k] = (dims, v)
+    table = result_table()
+    codes = sorted(table)
+    status_attrs = {"long_name": "jaxcoag.binned.RESULTS code per member (0 = successful)", "units": "1",
+                    "flag_values": np.asarray(codes, np.int32),
+                    "flag_meanings": " ".join(table[c][0] for c in codes)}
+    if solution:
+        t = out["t"]
+        units = {"mass_per_bin": "g cm-3", "number_per_bin": "cm-3", "gel_mass": "g cm-3", "mass_drift": "1",
+                 "steps": "1"}
+        if np.all(t == t[:1]):
+            coords["time"] = ("time", t[0], {"units": "s", "long_name": "time"})
+        else:
+            data["t"] = (pdims + ("time",), t.reshape(shape + t.shape[1:]), {"units": "s", "long_name": "output times"})
+        g = meta["grid"]
+        coords["mass"] = ("mass", np.asarray(g.centers, np.float64),
+                          {"units": "g", "long_name": "geometric bin-center mass sqrt(m_lo m_hi)"})
+        coords["mass_edge"] = ("mass_edge", np.asarray(g.edges, np.float64), {"units": "g", "long_name": "mass-bin edges"})
+        data = {k: (d[0], d[1], {"units": units.get(k, "1")}) if len(d) == 2 else d for k, d in data.items()}
+    data["status"] = (data["status"][0], np.asarray(data["status"][1], np.int32), status_attrs)
+    ds = xr.Dataset(data_vars=data, coords=coords)
+    nfail = int(np.sum(np.asarray(out["status"]) != 0))
+    ds.attrs.update({"n_members": int(math.prod(shape)), "n_failed": nfail, "grid": grid,
+                     "n_devices": 1 if mesh is None else int(math.prod(mesh.devices.shape))})
+    if attrs:
+        from .io import _attr_value
+        for k, v in attrs.items():
+            ds.attrs[str(k)] = _attr_value(v)
+    return ds

@@ -1,0 +1,146 @@
+"""jaxcoag.sweep: vmapped sweep == Python loop, failures as per-member status, sharded == unsharded."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+import jax.numpy as jnp
+
+from jaxcoag import kernels
+from jaxcoag._validate import JaxcoagInputError
+from jaxcoag.binned import RESULTS, MassGrid, monodisperse, solve_binned
+from jaxcoag.sweep import parameter_points, sweep
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+G = MassGrid.log(10 ** (-0.5 / 4), 1e3, 4)
+N0 = jnp.asarray(monodisperse(G, 1.0, 1.0))
+
+
+def box(k0, t_end):
+    """Constant kernel k0 [cm^3 s^-1], outputs at 0, t_end/2, t_end [s]; t_end = 1e8 s exceeds max_steps."""
+    return solve_binned(kernels.Constant(k0), G, N0, jnp.stack([0.0, 0.5 * t_end, t_end]),
+                        max_steps=60, throw=False)
+
+
+@pytest.fixture(scope="module")
+def ds():
+    return sweep(box, {"k0": [0.5, 1.0, 2.0], "t_end": [1.0, 10.0, 1e8]}, attrs={"scene": "constant"})
+
+
+def test_sweep_dataset_round_trips_netcdf(ds, tmp_path):
+    from jaxcoag import io
+    import xarray as xr
+
+    io.save_netcdf(ds, tmp_path / "sweep.nc")
+    xr.testing.assert_identical(io.load_netcdf(tmp_path / "sweep.nc"), ds)
+
+
+def test_sweep_equals_loop_and_failed_member(ds):
+    assert dict(ds.sizes) == {"k0": 3, "t_end": 3, "time": 3, "mass": G.nbins, "mass_edge": G.nbins + 1}
+    np.testing.assert_array_equal(ds["mass"].values, G.centers)
+    np.testing.assert_array_equal(ds["time"].values if "time" in ds.coords else ds["t"].values[0, 0], [0, 0.5, 1.0])
+    mx = RESULTS.max_steps_reached._value
+    for i, k0 in enumerate([0.5, 1.0, 2.0]):
+        for j, te in enumerate([1.0, 10.0, 1e8]):
+            s = box(k0, te)
+            st = int(ds["status"][i, j])
+            assert st == int(s.result._value)
+            if te < 1e3:
+                assert st == 0
+                np.testing.assert_allclose(ds["mass_per_bin"].values[i, j], np.asarray(s.mass_per_bin),
+                                           rtol=1e-10, atol=1e-14)
+                assert int(ds["steps"][i, j]) == int(s.stats["steps"])
+            else:
+                assert st == int(mx)  # the failing member is reported, the others finished
+    assert ds.attrs["n_failed"] == 3 and ds.attrs["n_members"] == 9 and ds.attrs["scene"] == "constant"
+    assert "max_steps_reached" in ds["status"].attrs["flag_meanings"]
+    # mass conservation in the successful members
+    ok = ds["status"].values == 0
+    assert np.max(np.abs(ds["mass_drift"].values[ok])) < 1e-10
+
+
+def test_zip_chunk_and_dict_outputs():
+    def f(a, b):
+        return {"s": a + b, "v": jnp.stack([a, b, a * b]), "bad": jnp.log(a - 1.5)}
+
+    d1 = sweep(f, {"a": [1.0, 2.0, 3.0, 4.0, 5.0], "b": [0.1, 0.2, 0.3, 0.4, 0.5]}, grid="zip")
+    d2 = sweep(f, {"a": [1.0, 2.0, 3.0, 4.0, 5.0], "b": [0.1, 0.2, 0.3, 0.4, 0.5]}, grid="zip", chunk=2)
+    np.testing.assert_allclose(d1["s"].values, [1.1, 2.2, 3.3, 4.4, 5.5], rtol=1e-15)
+    assert d1["v"].dims == ("member", "v_dim0")
+    np.testing.assert_array_equal(d1["v"].values, d2["v"].values)
+    np.testing.assert_array_equal(d1["a"].values, [1, 2, 3, 4, 5])
+    # a = 1 gives log(-0.5) = NaN: that member is 'nonfinite', the rest successful
+    assert list(d1["status"].values) == [int(RESULTS.nonfinite._value), 0, 0, 0, 0]
+    assert d1.attrs["n_failed"] == 1
+    out = sweep(lambda x: x ** 2, {"x": np.arange(1.0, 4.0)})
+    np.testing.assert_array_equal(out["value"].values, [1.0, 4.0, 9.0])
+
+
+def test_parameter_points_outer_order():
+    pts, shape = parameter_points({"alpha": [1e-4, 1e-3], "rho_g": [1.0, 2.0, 3.0]})
+    assert shape == (2, 3)
+    np.testing.assert_array_equal(pts["alpha"], [1e-4] * 3 + [1e-3] * 3)
+    np.testing.assert_array_equal(pts["rho_g"], [1.0, 2.0, 3.0] * 2)
+
+
+@pytest.mark.parametrize("params, kw, match", [
+    ({}, {}, "non-empty dict"),
+    ({"a": []}, {}, "empty"),
+    ({"a": [1.0, np.nan]}, {}, "NaN"),
+    ({"a": [[1.0]]}, {}, "1-D"),
+    ({"a": [1.0]}, {"grid": "cartesian"}, "grid must be"),
+    ({"a": [1.0], "b": [1.0, 2.0]}, {"grid": "zip"}, "equal-length"),
+    ({"a": [1.0]}, {"chunk": 0}, "chunk"),
+    ({"a": [1.0]}, {"mesh": "cpu"}, "Mesh"),
+    ({"a": [1.0]}, {"devices": []}, "empty"),
+])
+def test_bad_input(params, kw, match):
+    with pytest.raises(JaxcoagInputError, match=match):
+        sweep(lambda a, b=0.0: a, params, **kw)
+
+
+SHARD_SCRIPT = textwrap.dedent("""
+    import json, os, sys
+    os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=4"
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np, jax.numpy as jnp
+    sys.path.insert(0, {root!r})
+    from jaxcoag import kernels
+    from jaxcoag.binned import MassGrid, monodisperse, solve_binned
+    from jaxcoag.sweep import sweep
+    G = MassGrid.log(10 ** (-0.5 / 4), 1e3, 4)
+    N0 = jnp.asarray(monodisperse(G, 1.0, 1.0))
+    def box(k0, t_end):
+        return solve_binned(kernels.Constant(k0), G, N0, jnp.stack([0.0, 0.5 * t_end, t_end]),
+                            max_steps=60, throw=False)
+    p = {{"k0": [0.5, 1.0, 2.0], "t_end": [1.0, 1e8]}}        # 6 members on 4 devices: padded to 8
+    a = sweep(box, p)
+    b = sweep(box, p, devices=jax.devices())
+    mesh = jax.make_mesh((2, 2), ("x", "y"))
+    c = sweep(box, p, mesh=mesh, chunk=1)
+    out = dict(ndev=len(jax.devices()), nd_b=b.attrs["n_devices"], nd_c=c.attrs["n_devices"],
+               status_a=a.status.values.tolist(), status_b=b.status.values.tolist(),
+               status_c=c.status.values.tolist(),
+               diff_b=float(np.nanmax(np.abs(a.mass_per_bin.values - b.mass_per_bin.values)[a.status.values == 0])),
+               diff_c=float(np.nanmax(np.abs(a.mass_per_bin.values - c.mass_per_bin.values)[a.status.values == 0])))
+    print("RESULT" + json.dumps(out))
+""")
+
+
+def test_sharded_equals_unsharded_subprocess():
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT.format(root=ROOT)], capture_output=True, text=True,
+                       env=env, timeout=240)
+    assert r.returncode == 0, r.stderr[-3000:]
+    line = [x for x in r.stdout.splitlines() if x.startswith("RESULT")][-1]
+    out = json.loads(line[len("RESULT"):])
+    assert out["ndev"] == 4 and out["nd_b"] == 4 and out["nd_c"] == 4
+    mx = int(RESULTS.max_steps_reached._value)
+    assert out["status_a"] == [[0, mx]] * 3
+    assert out["status_b"] == out["status_a"] and out["status_c"] == out["status_a"]
+    assert out["diff_b"] <= 1e-14 and out["diff_c"] <= 1e-14
