@@ -9,7 +9,6 @@ import jax.numpy as jnp
 import diffrax
 
 from jaxcoag import kernels
-from jaxcoag.kernels import AbstractKernel
 from jaxcoag.binned import MassGrid, solve_binned, monodisperse, Shattering, steady_state
 
 G = MassGrid.log(10 ** (-0.5 / 5), 1e4, 5)
@@ -51,21 +50,7 @@ def test_jit_and_vmap_match():
     assert np.allclose(np.asarray(jt), np.asarray(loop[1]), rtol=1e-12, atol=1e-16)
 
 
-class TurbKernel(AbstractKernel):
-    """dv^2 = 1 + alpha 1e10 ((m1/1e6)^2/3 + (m2/1e6)^2/3); K = pi (a1 + a2)^2 dv."""
-
-    alpha: jax.Array
-
-    def __init__(self, alpha):
-        self.alpha = jnp.asarray(alpha, float)
-
-    def relative_velocity2(self, m1, m2, x1=None, x2=None):
-        return 1.0 + self.alpha * 1e10 * ((m1 / 1e6) ** (2 / 3) + (m2 / 1e6) ** (2 / 3))
-
-    def __call__(self, m1, m2, x1=None, x2=None):
-        a1 = (3 * m1 / (4 * jnp.pi)) ** (1 / 3)
-        a2 = (3 * m2 / (4 * jnp.pi)) ** (1 / 3)
-        return jnp.pi * (a1 + a2) ** 2 * jnp.sqrt(self.relative_velocity2(m1, m2))
+from _testkernels import SqrtAlphaKernel as TurbKernel  # noqa: E402  (shared test kernel)
 
 
 @pytest.mark.slow

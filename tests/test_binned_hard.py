@@ -1,7 +1,6 @@
 """Hard cases: a 160-decade grid, a single occupied bin / empty bins, the product kernel through
 gelation, and fragmentation equilibria over alpha = 1e-6 .. 1e-1 - finite values AND gradients."""
 
-import functools
 
 import numpy as np
 import pytest
@@ -9,7 +8,6 @@ import jax
 import jax.numpy as jnp
 
 from jaxcoag import kernels, diagnostics as D
-from jaxcoag.kernels import AbstractKernel
 from jaxcoag.binned import MassGrid, solve_binned, monodisperse, Shattering, steady_state, RESULTS
 
 WIDE = MassGrid.log(1e-20, 1e140, 2)          # 320 bins over 160 decades
@@ -74,21 +72,7 @@ def test_product_gelation_gradient():
     assert float(gr) == pytest.approx(float(fd), rel=1e-3)
 
 
-class SqrtAlphaKernel(AbstractKernel):
-    """dv^2 = 1 + alpha 1e10 ((m1/1e6)^2/3 + (m2/1e6)^2/3) (dv ~ sqrt(alpha)); K = pi (a1 + a2)^2 dv."""
-
-    alpha: jax.Array
-
-    def __init__(self, alpha):
-        self.alpha = jnp.asarray(alpha, float)
-
-    def relative_velocity2(self, m1, m2, x1=None, x2=None):
-        return 1.0 + self.alpha * 1e10 * ((m1 / 1e6) ** (2 / 3) + (m2 / 1e6) ** (2 / 3))
-
-    def __call__(self, m1, m2, x1=None, x2=None):
-        a1 = (3 * m1 / (4 * jnp.pi)) ** (1 / 3)
-        a2 = (3 * m2 / (4 * jnp.pi)) ** (1 / 3)
-        return jnp.pi * (a1 + a2) ** 2 * jnp.sqrt(self.relative_velocity2(m1, m2))
+from _testkernels import SqrtAlphaKernel  # noqa: E402  (shared test kernel)
 
 
 @pytest.mark.slow

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcoag
-from jaxcoag import diagnostics, scenes
+from jaxcoag import scenes
 from jaxcoag.binned import Shattering
 from jaxcoag.physics import gas as G
 

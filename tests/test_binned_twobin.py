@@ -5,7 +5,6 @@ import functools
 
 import numpy as np
 import pytest
-import jax
 import jax.numpy as jnp
 
 from jaxcoag import kernels, analytic as A, diagnostics as D

@@ -241,7 +241,6 @@ def _peak(f, lo, hi, n=2001, zooms=4):
         x = np.linspace(llo, lhi, n)
         v = np.asarray(g(jnp.asarray(10.0 ** x)))
         i = int(np.argmax(v))
-        dx = x[1] - x[0]
         llo, lhi = x[max(i - 2, 0)], x[min(i + 2, n - 1)]
     return 10.0 ** x[i], v[i]
 

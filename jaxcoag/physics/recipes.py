@@ -15,7 +15,7 @@ parameter b/b_max:
 Only two of the 72 tables are printed in the thesis (T-Tab6.7 global b=0 fpwl, T-Tab6.9 local
 b=0 fpwl); both ship here (:data:`TAB6_7`, :data:`TAB6_9`). :meth:`RecipeTables.from_cds`
 loads the full published set (CDS J/A+A/502/845 text format, one block per table headed
-``# GLOBAL, b=0.0, Q=fpwl``). :meth:`RecipeTables.surrogate` builds smooth placeholder tables
+``# GLOBAL, b=0.0, Q=fpwl``). :meth:`RecipeTables.surrogate` builds smooth surrogate tables
 from the thesis's verbal constraints; they are a [CHOICE], carry ``is_surrogate=True``, and
 any figure made with them must say so.
 
@@ -127,7 +127,7 @@ class RecipeTables(eqx.Module):
     Fields: glob, loc: :class:`RecipeTable`; is_surrogate: static bool (True for
     :meth:`surrogate` tables: label every figure made with them).
 
-    Constructors: :meth:`surrogate` (no download needed; [CHOICE] placeholders that contain the
+    Constructors: :meth:`surrogate` (no download needed; [CHOICE] surrogates that contain the
     printed T-Tab6.7/6.9), :meth:`from_cds` (the published tables).
 
     References: Ormel 2008 thesis §6.3.9, App. 6.A; spec/collisions.md §6.3, §6.5.
@@ -139,7 +139,7 @@ class RecipeTables(eqx.Module):
 
     @classmethod
     def surrogate(cls) -> "RecipeTables":
-        """Smooth placeholder tables from the thesis's verbal constraints ([CHOICE], labelled).
+        """Smooth surrogate tables from the thesis's verbal constraints ([CHOICE], labelled).
 
         - fpwl: b = 0 equals the printed T-Tab6.7 (global) / T-Tab6.9 (local); for b > 0 it is
           scaled down: at b = 0.75 to 25 % (most compact phi) ... 6 % (phi = 0.122), linearly
@@ -162,7 +162,7 @@ class RecipeTables(eqx.Module):
 
         Format: blocks headed ``# GLOBAL, b=0.0, Q=fpwl`` (recipe GLOBAL|LOCAL, b value,
         Q in fmiss, Nf, Sf, fpwl, q, Csig); the first data row holds the column axis
-        (phi_ini, or a_out/a for fmiss) after a leading placeholder; each following row is
+        (phi_ini, or a_out/a for fmiss) after a leading dummy entry; each following row is
         eps then the values. All 72 blocks (2 x 6 x 6 b) must be present.
 
         Arguments: path: file or directory (every regular file inside is read).
