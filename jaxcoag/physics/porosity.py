@@ -78,9 +78,8 @@ def smooth_step(x, width: float = 0.0):
 
 
 # ---------------------------------------------------------------------------------------------
-# geometry
-def _compact_radius(m, rho_s):
-    return (3.0 * m / (4.0 * jnp.pi * rho_s)) ** (1.0 / 3.0)
+# geometry (the radius formulas live in drag.py; this module adds the psi bookkeeping)
+from .drag import _compact_radius, _porous_radius  # noqa: E402
 
 
 def compact_radius_of(m, rho_s):
@@ -96,7 +95,7 @@ def compact_radius_of(m, rho_s):
 
 
 def _geometric_radius(m, psi, rho_s):
-    return _compact_radius(m, rho_s) * psi ** (1.0 / 3.0)
+    return _porous_radius(m, rho_s, psi)
 
 
 def geometric_radius(m, psi, rho_s):
