@@ -1,19 +1,10 @@
 """Every script in examples/ runs in quick mode and returns checked numbers."""
 
-import importlib.util
-import pathlib
-
 import numpy as np
 import pytest
+from _scripts import ROOT, load_script
 
-EXAMPLES = sorted((pathlib.Path(__file__).resolve().parents[1] / "examples").glob("[0-9][0-9]_*.py"))
-
-
-def _load(path):
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+EXAMPLES = sorted((ROOT / "examples").glob("[0-9][0-9]_*.py"))
 
 
 def test_there_are_examples():
@@ -22,7 +13,7 @@ def test_there_are_examples():
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
 def test_example_quick(path, capsys):
-    out = _load(path).main(["--quick"])
+    out = load_script(path, "_example_").main(["--quick"])
     assert isinstance(out, dict) and out
     printed = capsys.readouterr().out
     assert printed.strip()

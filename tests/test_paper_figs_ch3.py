@@ -4,19 +4,17 @@ Each script's ``main(["--quick", "--out", tmp])`` returns its check points (comp
 spec/velocities.md §9-§11); all must be within tolerance and the PNG must exist.
 """
 
-import importlib.util
 import pathlib
 
 import pytest
 
-FIGS = pathlib.Path(__file__).resolve().parents[1] / "paper_figs"
+from _scripts import ROOT, load_script  # noqa: E402  (shared script loader)
+
+FIGS = ROOT / "paper_figs"
 
 
 def _load(name):
-    spec = importlib.util.spec_from_file_location(f"_paper_fig_{name}", FIGS / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(FIGS / f"{name}.py", "_paper_fig_")
 
 
 EXPECTED = {

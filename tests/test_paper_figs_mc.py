@@ -11,20 +11,18 @@ Cost on a 2-core machine: every script compiles at least one engine configuratio
 (``pytest -m slow``; each 20 s - 4 min on a 2-core machine).
 """
 
-import importlib.util
 import math
 import pathlib
 
 import pytest
 
-FIGS = pathlib.Path(__file__).resolve().parents[1] / "paper_figs"
+from _scripts import ROOT, load_script  # noqa: E402  (shared script loader)
+
+FIGS = ROOT / "paper_figs"
 
 
 def _load(name):
-    spec = importlib.util.spec_from_file_location(f"_paper_fig_mc_{name}", FIGS / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(FIGS / f"{name}.py", "_paper_fig_mc_")
 
 
 def _run(name, tmp_path):
