@@ -14,11 +14,16 @@ import jax.numpy as jnp
 import numpy as np
 import equinox as eqx
 
-__all__ = ["check", "is_traced", "require_x64", "JaxcoagInputError"]
+__all__ = ["check", "is_traced", "require_x64", "JaxcoagInputError", "JaxcoagTypeError"]
 
 
 class JaxcoagInputError(ValueError):
     """Raised for a bad argument at a public entry point; the message says what to change."""
+
+
+class JaxcoagTypeError(JaxcoagInputError, TypeError):
+    """A JaxcoagInputError for an argument of the wrong kind (also a TypeError, so code that
+    catches TypeError - e.g. for a kernel without relative velocities - keeps working)."""
 
 
 def is_traced(x) -> bool:

@@ -1,20 +1,85 @@
-"""Command-line interface: ``jaxcoag demo`` (velocity/kernel demo, the default main job)."""
+"""Command-line interface.
+
+``jaxcoag run [scene.toml] [--out FILE]``  the main job: a binned coagulation(-fragmentation) run of a
+                                           TOML configuration (default: growth and fragmentation at 1 AU
+                                           in the MMSN); saves netCDF + figure panel, prints a summary.
+``jaxcoag plot FILE [--out PNG]``          re-plot a saved run.
+``jaxcoag sweep [scene.toml] --param alpha=1e-4,1e-3 ...``  parameter sweep of a configuration.
+``jaxcoag config [--default]``             print the default configuration (a commented TOML template).
+``jaxcoag demo``                           relative velocities and kernel of the ch. 4 nebula scene.
+
+``jaxcoag`` with no subcommand runs ``jaxcoag run``. Exit codes: 0 success, 1 the solver failed (the
+outputs up to the failure are saved) or the run stopped early (``--max-segments``), 2 refused input
+(nothing is written; the reason is on stderr).
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 import jax
+
+_COMMANDS = ("run", "plot", "sweep", "config", "demo")
 
 
 def _enable_x64():
     jax.config.update("jax_enable_x64", True)
 
 
+def _parse_value(text):
+    """A --set / --param value as TOML (number, bool, string, list), falling back to a bare string."""
+    from .config import _toml
+
+    try:
+        return _toml.loads(f"v = {text}")["v"]
+    except _toml.TOMLDecodeError:
+        return text
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="jaxcoag", description="Differentiable dust coagulation in JAX.")
+    p = argparse.ArgumentParser(prog="jaxcoag", description="Differentiable dust coagulation in JAX. "
+                                "With no subcommand: `jaxcoag run` (the default 1 AU disk run).")
     sub = p.add_subparsers(dest="command")
+
+    r = sub.add_parser("run", help="run a TOML scene with the binned engine (default: 1 AU disk, growth + "
+                       "fragmentation); saves netCDF + figure")
+    r.add_argument("config", nargs="?", default=None, help="TOML run configuration (default: the built-in "
+                   "1 AU MMSN run; `jaxcoag config` prints it)")
+    r.add_argument("--out", default=None, help="netCDF output file (default [output] path = jaxcoag_out/run.nc); "
+                   "the figure goes next to it (.png)")
+    r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override one configuration value, e.g. --set gas.alpha=1e-4 (repeatable)")
+    r.add_argument("--checkpoint", default=None, help="checkpoint file (default <out>.ckpt.npz)")
+    r.add_argument("--no-checkpoint", action="store_true", help="do not write a checkpoint")
+    r.add_argument("--resume", action="store_true", help="continue from the checkpoint (refused if it was "
+                   "written by another configuration; starts afresh if there is none)")
+    r.add_argument("--max-segments", type=int, default=None, help="stop after this many output intervals "
+                   "(continue later with --resume)")
+    r.add_argument("--no-figure", action="store_true", help="do not save the figure panel")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--quick", action="store_true", help="coarse grid, few outputs (seconds; smoke test)")
+
+    pl = sub.add_parser("plot", help="re-plot a saved run (netCDF) as the standard panel")
+    pl.add_argument("file", help="netCDF file written by `jaxcoag run`")
+    pl.add_argument("--out", default=None, help="PNG path (default: FILE with .png)")
+
+    s = sub.add_parser("sweep", help="sweep scalar parameters of a configuration (outer product)")
+    s.add_argument("config", nargs="?", default=None, help="TOML run configuration (default: built-in)")
+    s.add_argument("--param", action="append", default=[], metavar="NAME=V1,V2,...",
+                   help="parameter and values, e.g. --param alpha=1e-4,1e-3 (repeatable; names: alpha, R_au, "
+                   "T, Sigma_g, n, z_H, rho_X, M_star_msun, rho_s, dust_to_gas, v_frag, q, m_frag)")
+    s.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override one configuration value (repeatable)")
+    s.add_argument("--out", default="jaxcoag_out/sweep.nc", help="netCDF output (default jaxcoag_out/sweep.nc)")
+    s.add_argument("--chunk", type=int, default=1, help="members integrated together (default 1: one after "
+                   "the other, each with its own step sizes)")
+    s.add_argument("--quick", action="store_true", help="coarse grid, few outputs")
+
+    c = sub.add_parser("config", help="print the default run configuration (TOML with comments)")
+    c.add_argument("--resolved", action="store_true", help="print every value incl. defaults instead")
+
     d = sub.add_parser("demo", help="relative velocities and kernel of the ch. 4 nebula scene (table + figure)")
     d.add_argument("--disk", choices=["ch4", "mmsn"], default="ch4", help="disk preset (default ch4 = thesis Table 4.1)")
     d.add_argument("--R", type=float, default=3.0, help="radius in AU (default 3)")
@@ -26,22 +91,118 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _load_cfg(path, sets):
+    from . import config
+
+    cfg = config.default() if path is None else config.load(path)
+    if sets:
+        over = {}
+        for item in sets:
+            if "=" not in item:
+                raise config.JaxcoagInputError(f"--set needs SECTION.KEY=VALUE, got {item!r}.")
+            k, v = item.split("=", 1)
+            over[k.strip()] = _parse_value(v.strip())
+        cfg = cfg.replace(**over)
+    return cfg
+
+
+def _cmd_run(args) -> int:
+    from . import runner
+
+    cfg = _load_cfg(args.config, args.set)
+    if args.max_segments is not None and args.max_segments < 1:
+        raise runner.JaxcoagInputError("--max-segments must be >= 1.")
+    ck = False if args.no_checkpoint else args.checkpoint
+    if args.no_checkpoint and args.resume:
+        raise runner.JaxcoagInputError("--resume needs a checkpoint; drop --no-checkpoint.")
+    res = runner.run(cfg, out=args.out, checkpoint=ck, resume=args.resume, progress=not args.no_progress,
+                     figure=False if args.no_figure else None, max_segments=args.max_segments, quick=args.quick)
+    return 0 if (res.finished and not res.failed) else 1
+
+
+def _cmd_plot(args) -> int:
+    from . import io, runner
+    from .plot import panel
+
+    if not os.path.isfile(args.file):
+        raise runner.JaxcoagInputError(f"no file at {args.file!r}; give a netCDF file written by `jaxcoag run`.")
+    try:
+        ds = io.load_netcdf(args.file)
+    except (OSError, ValueError) as e:
+        raise runner.JaxcoagInputError(f"{args.file} is not a readable netCDF file ({e}).") from e
+    sol = runner.solution_from_dataset(ds)
+    kern = runner.kernel_from_dataset(ds)
+    out = args.out or runner.figure_path(args.file)
+    title = str(ds.attrs.get("run_name", os.path.basename(args.file)))
+    d = os.path.dirname(os.path.abspath(out))
+    os.makedirs(d, exist_ok=True)
+    panel(sol, kern, path=out, title=title)
+    print(f"jaxcoag plot: {sol.grid.nbins} bins, {len(sol.ts)} outputs up to t = {float(sol.ts[-1]) / 3.15576e7:.4g} yr"
+          f" ({'with' if kern is not None else 'without'} the run's kernel); saved {out}")
+    return 0
+
+
+def _cmd_sweep(args) -> int:
+    from . import runner
+
+    cfg = _load_cfg(args.config, args.set)
+    params = {}
+    for item in args.param:
+        if "=" not in item:
+            raise runner.JaxcoagInputError(f"--param needs NAME=V1,V2,..., got {item!r}.")
+        k, v = item.split("=", 1)
+        vals = []
+        for x in v.split(","):
+            try:
+                vals.append(float(x))
+            except ValueError:
+                raise runner.JaxcoagInputError(f"--param {k}: {x!r} is not a number.") from None
+        params[k.strip()] = vals
+    if args.chunk < 1:
+        raise runner.JaxcoagInputError("--chunk must be >= 1.")
+    ds, _ = runner.sweep_config(cfg, params, chunk=args.chunk, quick=args.quick, out=args.out)
+    return 0 if int(ds.attrs["n_failed"]) == 0 else 1
+
+
+def _cmd_config(args) -> int:
+    from . import config
+
+    if args.resolved:
+        print(config.to_toml(config.default().data))
+    else:
+        with open(config.default_path()) as fh:
+            sys.stdout.write(fh.read())
+    return 0
+
+
 def main(argv=None) -> int:
     _enable_x64()
+    from ._validate import JaxcoagInputError
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or (argv[0] not in _COMMANDS and argv[0] not in ("-h", "--help")):
+        argv = ["run"] + argv
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command is None:
-        args = parser.parse_args(["demo"] + (argv or []))
-    if args.command == "demo":
-        from .demo import run_demo
+    name = args.command
+    try:
+        if name == "run":
+            return _cmd_run(args)
+        if name == "plot":
+            return _cmd_plot(args)
+        if name == "sweep":
+            return _cmd_sweep(args)
+        if name == "config":
+            return _cmd_config(args)
+        if name == "demo":
+            from .demo import run_demo
 
-        try:
             run_demo(disk=args.disk, R_au=args.R, alpha=args.alpha, rho_s=args.rho_s, n=args.n,
                      out=args.out, quick=args.quick)
-        except (ValueError, TypeError) as e:
-            print(f"jaxcoag demo: error: {e}", file=sys.stderr)
-            return 2
-        return 0
+            return 0
+    except (JaxcoagInputError, ValueError, TypeError, OSError) as e:
+        print(f"jaxcoag {name}: error: {e}", file=sys.stderr)
+        return 2
     parser.print_help()
     return 1
 

@@ -1,4 +1,4 @@
-"""Velocity / kernel demo: the built-in default main job until the coagulation run lands.
+"""Velocity / kernel demo (``jaxcoag demo``); the main job is ``jaxcoag run`` (:mod:`jaxcoag.runner`).
 
 Evaluates the chapter-4 nebula scene (Brownian + Ormel & Cuzzi 2007 turbulence + radial drift,
 compact spheres) at a disk location, prints a table of Stokes numbers, the velocity components

@@ -22,8 +22,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .physics import drag as _drag
 from .physics import drift as _drift
 from .physics import turbulence as _turb
+from ._validate import JaxcoagInputError
 from .physics.gas import GasState
 
 __all__ = [
@@ -34,6 +36,9 @@ __all__ = [
     "RadialDrift",
     "AzimuthalDrift",
     "Settling",
+    "TurbulenceW84",
+    "AbstractPorosity",
+    "EnlargementFactor",
 ]
 
 
@@ -96,7 +101,7 @@ class TurbulenceOC07(AbstractVelocity):
 
     def __check_init__(self):
         if self.method not in ("exact", "ya", "ch03"):
-            raise ValueError(f"TurbulenceOC07: unknown method {self.method!r}; use 'exact', 'ya' or 'ch03'")
+            raise JaxcoagInputError(f"TurbulenceOC07: unknown method {self.method!r}; use 'exact', 'ya' or 'ch03'")
 
     def per_particle(self, p, gas):
         return _turb.st_star(p.st, gas.Re_eff, method=self.method, beta_over_alpha=self.beta_over_alpha)
@@ -136,3 +141,66 @@ class Settling(AbstractVelocity):
 
     def dv2(self, p1, c1, p2, c2, gas):
         return _drift._dv2_settling(p1.tau_f * gas.Omega, p2.tau_f * gas.Omega, gas.z, gas.Omega)
+
+
+class TurbulenceW84(AbstractVelocity):
+    """Legacy turbulent relative velocity: Weidenschilling (1984) piecewise fits (thesis ch. 2,
+    eqs. 2.5a/b), as used in the thesis ch. 2 protoplanetary-disk runs.
+
+    With tau_1 >= tau_2 (friction times, eddy times t_s, t_L and velocities v_s, v_L of the
+    gas state): v_s (tau_1 - tau_2)/t_s below t_s; min(v_s 3/(1 + tau_2/tau_1) sqrt(tau_1/t_s),
+    v_L) up to t_L; v_L beyond. Piecewise (discontinuous at tau_1 = t_s, see thesis Fig. 2.1):
+    gradients exist inside each branch only. Use a gas state built with the ch. 2 conventions
+    (t_L = 2 pi/Omega, v_L = alpha^1/2 c_g: ``tL_factor=2*pi``) to reproduce ch. 2.
+
+    References: Weidenschilling (1984) Icarus 60, 553; Ormel (2008) thesis eqs. 2.2-2.5;
+    spec/velocities.md §4.8.
+    """
+
+    name: ClassVar[str] = "turbulence_w84"
+
+    def dv2(self, p1, c1, p2, c2, gas):
+        dv = _turb.dv_turbulent_w84(p1.tau_f, p2.tau_f, gas.t_s, gas.t_L, gas.v_s, gas.v_L)
+        return dv * dv
+
+
+class AbstractPorosity(eqx.Module):
+    """A porosity model for :class:`~jaxcoag.Scene` (``Scene(porosity=...)``): how a particle's
+    structural parameters (the trailing axis of ``x``) set its geometric radius and area."""
+
+    n_struct: ClassVar[int] = 1
+
+    @abc.abstractmethod
+    def radius_area(self, m, x, rho_s):
+        """(a [cm], projected area [cm^2]) of particles of mass m [g] with structure x."""
+
+
+class EnlargementFactor(AbstractPorosity):
+    """Structural parameter ``x[..., index]`` is the enlargement factor psi = V/V* >= 1.
+
+    Geometric radius a = a* psi^(1/3) with a* = (3 m/(4 pi rho_s))^(1/3), projected area
+    A = pi a^2 = pi a*^2 psi^(2/3) [T2.6]; the Epstein friction time then follows as
+    tau_f = 3 m/(4 c_g rho_g A) = rho_s a*/(c_g rho_g psi^(2/3)) [T2.4, T2.25]. psi = 1 is a
+    compact sphere. The collision cross-section uses the same geometric radii (ch. 2, ch. 4:
+    sigma = pi (a1 + a2)^2, spec/collisions.md §1.4 "geometric").
+
+    Attributes:
+        index: which structural parameter holds psi (static; default 0).
+
+    References: Ormel (2008) thesis eqs. 2.4, 2.6, 2.25; spec/collisions.md §1.1-§1.2.
+    """
+
+    index: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        if not isinstance(self.index, int) or self.index < 0:
+            raise JaxcoagInputError(f"EnlargementFactor(index={self.index!r}): index must be a non-negative int")
+
+    @property
+    def n_struct(self) -> int:  # type: ignore[override]
+        return self.index + 1
+
+    def radius_area(self, m, x, rho_s):
+        psi = x[..., self.index]
+        a = _drag._compact_radius(m, rho_s) * jnp.cbrt(psi)
+        return a, jnp.pi * a ** 2

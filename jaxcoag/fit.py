@@ -130,12 +130,15 @@ def nebula_box(*, R=3.0 * C.AU, alpha=1e-4, rho_g=None, v_frag=100.0, a0=1e-4, r
     """
     require_x64("jaxcoag.fit.nebula_box")
     for name, v in (("R", R), ("alpha", alpha), ("v_frag", v_frag), ("a0", a0), ("rho_s", rho_s),
-                    ("dust_to_gas", dust_to_gas), ("bins_per_decade", bins_per_decade), ("decades", decades)):
+                    ("dust_to_gas", dust_to_gas), ("bins_per_decade", bins_per_decade), ("decades", decades),
+                    ("rtol", rtol), ("atol", atol)):
         if not (np.isfinite(float(v)) and float(v) > 0):
             raise JaxcoagInputError(f"{name} must be finite and > 0 (got {v!r}).")
     ts = np.asarray(ts, np.float64)
-    if ts.ndim != 1 or ts.size < 1 or not np.all(ts > 0) or not np.all(np.diff(ts) > 0):
-        raise JaxcoagInputError("ts must be a 1-D increasing array of observation times > 0 s.")
+    if ts.ndim != 1 or ts.size < 1 or not np.all(np.isfinite(ts)) or not np.all(ts > 0) \
+            or not np.all(np.diff(ts) > 0):
+        raise JaxcoagInputError(f"ts must be a 1-D increasing array of finite observation times > 0 s "
+                                f"(t = 0 is prepended); got {ts.tolist()!r}.")
     gas0 = ch4_disk(R)
     if rho_g is None:
         rho_g = float(gas0.rho_g)
@@ -178,6 +181,8 @@ def synthetic_target(model: NebulaBox, truth: dict, *, noise=0.01, key=None):
         (default ``jax.random.key(0)``: fixed, reproducible).
     Returns: array (len(ts) - 1, nbins) of noisy mass fractions [-].
     """
+    if not isinstance(model, NebulaBox):
+        raise JaxcoagInputError("model must be a jaxcoag.fit.NebulaBox (build it with nebula_box()).")
     truth = _check_params(truth, "truth", model)
     if not (np.isfinite(noise) and noise >= 0):
         raise JaxcoagInputError(f"noise must be a finite relative level >= 0 (got {noise!r}).")
@@ -234,8 +239,10 @@ def fit_adam(model: NebulaBox, target, init: dict, *, steps=150, learning_rate=0
     x0, target = _prepare(model, target, init)
     if not (isinstance(steps, (int, np.integer)) and steps > 0):
         raise JaxcoagInputError(f"steps must be a positive int (got {steps!r}).")
-    if not (learning_rate > 0 and final_learning_rate > 0):
-        raise JaxcoagInputError("learning rates must be > 0.")
+    for name, v in (("learning_rate", learning_rate), ("final_learning_rate", final_learning_rate)):
+        if not (np.isfinite(float(v)) and float(v) > 0):
+            raise JaxcoagInputError(f"{name} must be finite and > 0 (a step in ln-parameter units, e.g. 0.1 and "
+                                    f"1e-3); got {v!r}.")
     sched = optax.cosine_decay_schedule(learning_rate, int(steps), alpha=final_learning_rate / learning_rate)
     opt = optax.adam(sched)
 
@@ -279,6 +286,12 @@ def fit_least_squares(model: NebulaBox, target, init: dict, *, solver="levenberg
     References: More (1978); optimistix.least_squares (forward-mode Jacobian).
     """
     x0, target = _prepare(model, target, init)
+    for name, v in (("rtol", rtol), ("atol", atol)):
+        if not (np.isfinite(float(v)) and float(v) > 0):
+            raise JaxcoagInputError(f"{name} must be finite and > 0 (optimistix convergence tolerance, e.g. 1e-8); "
+                                    f"got {v!r}.")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
+        raise JaxcoagInputError(f"max_steps must be a positive int (optimiser iterations, e.g. 100); got {max_steps!r}.")
     if solver == "levenberg_marquardt":
         solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     elif solver == "gauss_newton":

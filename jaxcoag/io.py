@@ -149,6 +149,44 @@ def _pick_engine():
     raise ImportError("saving netCDF needs h5netcdf, netCDF4 or scipy.")  # pragma: no cover
 
 
+
+def atomic_write(path, write, *, what="output file"):
+    """Write ``path`` atomically: ``write(tmp)`` fills a temporary file in the same directory,
+    which is fsync'ed, given the usual permissions (0666 & ~umask; ``mkstemp`` makes 0600)
+    and renamed over ``path`` with ``os.replace`` (atomic on POSIX and Windows). On any
+    exception the temporary file is removed and an existing ``path`` is left untouched.
+
+    Arguments:
+        path: target file path (str or PathLike); its directory must exist.
+        write: callable taking the temporary file path (str) and writing the content there.
+        what: name used in the error message when the directory is missing.
+
+    Returns:
+        the target path (str).
+    """
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(d):
+        raise JaxcoagInputError(f"directory {d!r} for the {what} does not exist; create it first.")
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=d)
+    os.close(fd)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        write(tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.remove(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
 def save_netcdf(ds_or_solution, path, *, attrs=None, engine=None):
     """Write a dataset (or a BinnedSolution, via :func:`to_xarray`) to netCDF atomically.
 
@@ -173,23 +211,13 @@ def save_netcdf(ds_or_solution, path, *, attrs=None, engine=None):
     else:
         ds = to_xarray(ds_or_solution, attrs=attrs)
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise JaxcoagInputError(f"{path!r} is a directory; give a file path such as {os.path.join(path, 'run.nc')!r}.")
     d = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(d):
         raise JaxcoagInputError(f"directory {d!r} for the netCDF file does not exist; create it first.")
     engine = engine or _pick_engine()
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=d)
-    os.close(fd)
-    try:
-        ds.to_netcdf(tmp, engine=engine)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.remove(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine=engine))
     return path
 
 

@@ -91,6 +91,8 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None):
     ax_p.set_yscale("log")
     if np.all(t > 0) or (len(t) > 2 and t[1] > 0 and t[0] == 0 and t[-1] / t[1] > 30):
         ax_p.set_xscale("symlog", linthresh=t[1] if t[0] == 0 else t[0])
+        if t[0] >= 0:
+            ax_p.set_xlim(left=0.0)  # symlog would otherwise show negative times
     ax_p.set_xlabel("t [s]")
     ax_p.set_ylabel(r"mass peak $m_p$ [g]")
     ax_p.set_title("(b) mass-peak history")

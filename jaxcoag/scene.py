@@ -1,7 +1,9 @@
 """Scenes: which physical effects a simulation includes (structure), and the physical kernel.
 
-A :class:`Scene` names its velocity effects (a tuple of :mod:`jaxcoag.effects` modules) and
-has room for an outcome model and a porosity model (filled by the outcomes issue). It holds no
+A :class:`Scene` names its velocity effects (a tuple of :mod:`jaxcoag.effects` modules), an
+outcome model and a porosity model (``porosity="psi"``: the enlargement factor psi is the
+structural parameter x[..., 0]; a = a* psi^(1/3), A = pi a^2, tau_f from (m, psi), thesis
+eqs. 2.4, 2.6, 2.25; ``None`` = compact spheres, tracing no porosity ops). It holds no
 disk numbers: combine it with a :class:`~jaxcoag.physics.gas.GasState` and a material density
 to obtain a :class:`SceneKernel`, the collision kernel K = sigma Delta v [cm^3 s^-1] that both
 engines evaluate::
@@ -27,7 +29,7 @@ import jax
 import jax.numpy as jnp
 
 from . import effects as _eff
-from ._validate import check
+from ._validate import JaxcoagInputError, JaxcoagTypeError, check
 from .kernels import AbstractKernel
 from .physics import collision as _coll
 from .physics import drag as _drag
@@ -36,6 +38,19 @@ from .physics.gas import GasState
 __all__ = ["Scene", "SceneKernel"]
 
 _DRAG_REGIMES = ("auto", "epstein", "stokes")
+
+
+_POROSITY_NAMES = {"psi": lambda: _eff.EnlargementFactor()}
+
+
+def _porosity_model(p):
+    """Scene(porosity=...) converter: None, "psi" or an AbstractPorosity instance."""
+    if isinstance(p, str):
+        if p not in _POROSITY_NAMES:
+            raise JaxcoagInputError(f"unknown porosity {p!r}; use None (compact), 'psi' (enlargement factor "
+                             "psi as structural parameter x[..., 0]) or jaxcoag.effects.EnlargementFactor(index)")
+        return _POROSITY_NAMES[p]()
+    return p
 
 
 class Scene(eqx.Module):
@@ -47,7 +62,10 @@ class Scene(eqx.Module):
         focusing: include gravitational focusing in the cross-section (eq. 5.5) (static bool).
         drag_regime: "auto" (Epstein/Stokes switch at a = 9/4 l_mfp, eq. 4.6), "epstein", "stokes".
         outcome: collision-outcome model, or None for perfect sticking (outcomes issue).
-        porosity: porosity model, or None for compact spheres (outcomes issue).
+        porosity: None (compact spheres: traces no porosity ops), ``"psi"`` or
+            :class:`jaxcoag.effects.EnlargementFactor` (structural parameter x[..., 0] is the
+            enlargement factor psi: a = a* psi^(1/3), A = pi a^2, tau_f from (m, psi); thesis
+            eqs. 2.4, 2.6, 2.25). The kernel then has ``n_struct = 1`` and takes ``x``.
         name: label recorded in outputs.
     """
 
@@ -55,35 +73,35 @@ class Scene(eqx.Module):
     focusing: bool = eqx.field(static=True, default=False)
     drag_regime: str = eqx.field(static=True, default="auto")
     outcome: Any = None
-    porosity: Any = None
+    porosity: Any = eqx.field(default=None, converter=lambda p: _porosity_model(p))
     name: str = eqx.field(static=True, default="custom")
 
     def __check_init__(self):
         if not isinstance(self.velocities, tuple) or len(self.velocities) == 0:
-            raise ValueError(
+            raise JaxcoagInputError(
                 "Scene(velocities=...) needs a non-empty tuple of velocity effects, e.g. "
                 "(jaxcoag.effects.Brownian(), jaxcoag.effects.TurbulenceOC07())"
             )
         names = []
         for v in self.velocities:
             if not isinstance(v, _eff.AbstractVelocity):
-                raise TypeError(
+                raise JaxcoagTypeError(
                     f"Scene velocities must be jaxcoag.effects velocity modules (Brownian(), "
                     f"TurbulenceOC07(), RadialDrift(), AzimuthalDrift(), Settling()); got {v!r}"
                 )
             names.append(v.name)
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ValueError(
+            raise JaxcoagInputError(
                 f"Scene lists the velocity effect(s) {dup} more than once; they are incompatible "
                 "(each effect is added once in quadrature). Keep one of each."
             )
         if self.drag_regime not in _DRAG_REGIMES:
-            raise ValueError(f"unknown drag_regime {self.drag_regime!r}; use one of {_DRAG_REGIMES}")
-        if self.porosity is not None:
-            raise ValueError(
-                "Scene(porosity=...) is reserved for the porosity models of the outcomes issue; "
-                "use porosity=None (compact spheres) for now."
+            raise JaxcoagInputError(f"unknown drag_regime {self.drag_regime!r}; use one of {_DRAG_REGIMES}")
+        if self.porosity is not None and not isinstance(self.porosity, _eff.AbstractPorosity):
+            raise JaxcoagTypeError(
+                f"Scene(porosity=...) must be None (compact spheres), 'psi' or a "
+                f"jaxcoag.effects porosity model (EnlargementFactor()); got {self.porosity!r}"
             )
 
     @property
@@ -101,11 +119,11 @@ class Scene(eqx.Module):
                 no Brownian term; spec §8.6). Default 0.
         """
         if not isinstance(gas, GasState):
-            raise TypeError("Scene.kernel(gas, ...): gas must be a jaxcoag GasState "
+            raise JaxcoagTypeError("Scene.kernel(gas, ...): gas must be a jaxcoag GasState "
                             "(e.g. jaxcoag.physics.gas.mmsn_hayashi81(jaxcoag.constants.AU))")
         if rho_s is None:
             if material is None or not hasattr(material, "rho_s"):
-                raise ValueError("Scene.kernel needs the material density: pass rho_s=... [g cm^-3] "
+                raise JaxcoagInputError("Scene.kernel needs the material density: pass rho_s=... [g cm^-3] "
                                  "or material=<object with .rho_s>")
             rho_s = material.rho_s
         rho_s = check(rho_s, "rho_s", positive=True, hint="material density in g cm^-3, e.g. 1.6 or 3.0")
@@ -127,11 +145,34 @@ class SceneKernel(AbstractKernel):
     rho_s: jax.Array
     dv_floor: jax.Array
 
+    @property
+    def n_struct(self) -> int:  # type: ignore[override]
+        """Number of structural parameters read from ``x`` (0 compact, 1 with porosity="psi")."""
+        por = self.scene.porosity
+        return 0 if por is None else por.n_struct
+
     def particles(self, m, x=None) -> _eff.Particles:
-        """Per-particle properties for masses m [g] (compact spheres)."""
+        """Per-particle properties for masses m [g] and structure x (shape m.shape + (n_struct,)).
+
+        Compact scenes ignore x. Porous scenes need x: a = a* psi^(1/3), A = pi a^2 and the
+        friction time from (m, A) (Epstein tau_f = rho_s a*/(c_g rho_g psi^(2/3)), thesis eq. 2.25).
+        """
         m = jnp.asarray(m)
-        a = _drag._compact_radius(m, self.rho_s)
-        area = jnp.pi * a ** 2
+        por = self.scene.porosity
+        if por is None:
+            a = _drag._compact_radius(m, self.rho_s)
+            area = jnp.pi * a ** 2
+        else:
+            if x is None:
+                raise JaxcoagTypeError(
+                    "this SceneKernel has porosity (n_struct = 1): pass the structural parameters, e.g. "
+                    "K(m1, m2, x1, x2) or K.matrix(m, x) with x[..., 0] = psi >= 1 (x = ones((N, 1)) for "
+                    "compact particles)")
+            x = jnp.asarray(x)
+            if x.ndim == 0 or x.shape[-1] < por.n_struct:
+                raise JaxcoagTypeError(f"structural parameters x need a trailing axis of length >= {por.n_struct} "
+                                f"(x[..., 0] = psi); got shape {x.shape}")
+            a, area = por.radius_area(m, x, self.rho_s)
         tau = _drag._friction_time(m, a, self.gas, area=area, regime=self.scene.drag_regime)
         return _eff.Particles(m=m, a=a, area=area, tau_f=tau, st=tau / self.gas.t_L)
 

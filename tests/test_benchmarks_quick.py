@@ -64,3 +64,51 @@ def test_binned_benchmark_quick_json(tmp_path):
     assert abs(r["mass_drift_final"]) < 1e-10
     assert r["wall_s"] > 0.0 and r["compile_s"] >= 0.0
     assert out.with_suffix(".png").exists()
+
+
+def test_sweep_throughput_quick(tmp_path):
+    """4 x 4 nebula-box sweep: vmapped == chunked == looped, throughputs finite and positive."""
+    from benchmarks import sweep_throughput as S
+
+    out = S.main(["--quick", "--no-sharded", "--out", str(tmp_path / "st.json")])
+    data = json.loads((tmp_path / "st.json").read_text())
+    (r,) = data["results"]
+    assert r["points"] == 16 and r["failed"] == 0 and r["loop_points_timed"] == 16
+    for k in ("vmap_pts_per_s", "chunked_pts_per_s", "loop_pts_per_s", "vmap_over_loop"):
+        assert np.isfinite(r[k]) and r[k] > 0.0, k
+    assert r["max_abs_diff_vmap_loop"] < 1e-9 and r["max_abs_diff_chunked_vmap"] < 1e-9
+    assert r["repeat_identical"] is True
+    # ln m_peak [ln g] of 1 micron (4e-12 g) grains after 1e10 s: grown, but far below the grid top
+    lo, hi = r["ln_mpeak_range"]
+    assert np.log(4e-12) < lo < hi < np.log(4e-12 * 1e8)
+    assert out["results"][0]["grid"] == "4x4" and (tmp_path / "st.png").exists()
+
+
+@pytest.mark.slow
+def test_sweep_throughput_sharded_quick(tmp_path):
+    """The 4-device subprocess of the throughput benchmark: sharded == unsharded."""
+    from benchmarks import sweep_throughput as S
+
+    (r,) = S.run_sharded([3])
+    assert r["n_devices"] == 4 and r["points"] == 9 and r["same_status"] is True
+    assert r["max_abs_diff_sharded_unsharded"] < 1e-9
+    assert r["sharded_pts_per_s"] > 0.0 and r["unsharded_pts_per_s"] > 0.0
+
+
+@pytest.mark.slow
+def test_gradient_cost_quick(tmp_path):
+    """Gradient-cost benchmark on the smallest grid: reverse, jvp and jacfwd agree with each
+    other and with central differences; cost ratios finite and positive."""
+    from benchmarks import gradient_cost as Gc
+
+    Gc.main(["--quick", "--reps", "2", "--out", str(tmp_path / "gc.json")])
+    rows = json.loads((tmp_path / "gc.json").read_text())["results"]
+    assert [r["fragmentation"] for r in rows] == [False, True]
+    for r in rows:
+        assert r["result"] == "successful" and r["bins"] == 24
+        for k in ("forward_s", "reverse_ratio", "jvp_ratio", "jacfwd_ratio", "compile_reverse_s"):
+            assert np.isfinite(r[k]) and r[k] > 0.0, k
+        assert r["rev_vs_fwd_max_rel"] < 1e-8 and r["jvp_vs_grad0_rel"] < 1e-8
+        assert r["rev_vs_fd_max_rel"] < 1e-4
+        # growth speeds up with alpha and with rho_g (collision rate ~ dust density)
+        assert r["grad"]["alpha"] > 0.0 and r["grad"]["rho_g"] > 0.0

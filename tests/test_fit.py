@@ -82,3 +82,18 @@ def test_three_parameters_with_fragmentation():
     init = {"alpha": 3e-4, "rho_g": truth["rho_g"] / 3.0, "v_frag": 6.0}
     res = fit.fit_least_squares(m, target, init)
     assert max(_rel(res, truth).values()) < 0.02, _rel(res, truth)
+
+
+@pytest.mark.slow
+def test_example_02_prints_the_recovery_line(capsys):
+    """examples/02 (quick) ends with `recovered alpha=... true=... rel_err=...` and meets 2 %."""
+    import re
+    from _scripts import ROOT, load_script
+
+    out = load_script(ROOT / "examples" / "02_fit_nebula_parameters.py", "_fit_example_").main(["--quick"])
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    m = re.fullmatch(r"recovered alpha=(\S+) true=(\S+) rel_err=(\S+)", last)
+    assert m, last
+    alpha, true, rel = map(float, m.groups())
+    assert true == 1e-4 and abs(alpha / true - 1.0) == pytest.approx(rel, abs=1e-5)  # 7 printed digits
+    assert rel < 0.02 and out["rel_err_rho_g"] < 0.02

@@ -181,3 +181,23 @@ def test_stochastic_leftover_limits_species_growth():
     x = mass[:, -1] / 1e30
     assert abs(x.mean() - 1) < 4 * max(x.std(ddof=1), 1e-3) / 2 + 0.02
     _check_moments(sto, times, np.exp(-times / 2), np.exp(times), bias=0.1)
+
+
+def test_zoom_cap_tail_formula():
+    """Distribution-method tail cap: z <= log2(g r t / n_events), but >= log2(g / W_max); none at t = 0."""
+    from jaxcoag.mc import grouping as G
+
+    w = jnp.array([1.0, 1.5, 3.0, 0.0])
+    z = jnp.array([40, 40, 2, 0], dtype=jnp.int32)
+    valid = jnp.array([True, True, True, False])
+    lr = jnp.zeros(4)  # r = 1 collision per particle per unit time
+    cap = np.asarray(G.zoom_cap_tail(w, z, valid, lr, 1.0, jnp.log(2.0 ** 35), 1.0))
+    # g = 2^40 -> 40; g = 1.5 2^40 -> floor(40.58) = 40; g = 12, r t = 1 -> 3; invalid -> no cap
+    np.testing.assert_array_equal(cap, [40, 40, 3, 2000])
+    cap = np.asarray(G.zoom_cap_tail(w, z, valid, lr, 1.0, jnp.log(2.0 ** 35), 2.0 ** 10))
+    np.testing.assert_array_equal(cap[:3], [30, 30, 0])
+    # early times: the W_max floor z >= log2(g / W_max) = 5 keeps a bulk species at <= 2^35 groups
+    cap = np.asarray(G.zoom_cap_tail(w, z, valid, lr, 2.0 ** -50, jnp.log(2.0 ** 35), 1.0))
+    np.testing.assert_array_equal(cap[:3], [5, 5, 0])
+    cap = np.asarray(G.zoom_cap_tail(w, z, valid, lr, 0.0, jnp.log(2.0 ** 35), 1.0))
+    np.testing.assert_array_equal(cap, [2000] * 4)

@@ -176,7 +176,7 @@ def test_bad_scenes_and_parameters_raise_clear_errors():
         scenes.brownian_only().kernel(_gas(), rho_s=-1.0)
     with pytest.raises(ValueError, match="material density"):
         scenes.brownian_only().kernel(_gas())
-    with pytest.raises(KeyError, match="available"):
+    with pytest.raises(ValueError, match="available"):
         scenes.get("nebula_ch5")
 
 

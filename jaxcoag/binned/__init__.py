@@ -14,3 +14,6 @@ from .fragmentation import (Shattering as Shattering, ShatterToMonomers as Shatt
                             AbstractFragmentation as AbstractFragmentation)
 from .grid import monodisperse as monodisperse, mrn as mrn, exponential as exponential
 from .dg import DGScheme as DGScheme
+from .outcome import (OutcomeFragmentation as OutcomeFragmentation, O07Recipe as O07Recipe,
+                      O09Recipe as O09Recipe, ShatterAtMassRecipe as ShatterAtMassRecipe,
+                      VfragShatter as VfragShatter)

@@ -92,9 +92,15 @@ class MassGrid:
         Arguments: log10_min, log10_max [log10 g]; bins_per_decade (> 0).
         Returns: MassGrid. References: as :meth:`log`.
         """
-        decades = float(log10_max) - float(log10_min)
+        log10_min, log10_max, bpd = float(log10_min), float(log10_max), float(bins_per_decade)
+        if not (np.isfinite(log10_min) and np.isfinite(log10_max)):
+            raise JaxcoagInputError(f"log10_min and log10_max must be finite log10 masses [log10 g] "
+                                    f"(got {log10_min!r}, {log10_max!r}).")
+        if not (np.isfinite(bpd) and bpd > 0):
+            raise JaxcoagInputError(f"bins_per_decade must be > 0 (got {bins_per_decade!r}).")
+        decades = log10_max - log10_min
         if not decades > 0:
-            raise JaxcoagInputError("log10_max must exceed log10_min.")
+            raise JaxcoagInputError(f"log10_max must exceed log10_min (got {log10_min!r} .. {log10_max!r}).")
         n = int(round(decades * float(bins_per_decade)))
         if n < 2:
             raise JaxcoagInputError(
@@ -177,9 +183,12 @@ def mrn(grid: MassGrid, a_min, a_max, rho_s, rho_d, q=3.5):
     """
     a_min, a_max, rho_s, rho_d, q = map(float, (a_min, a_max, rho_s, rho_d, q))
     if not (0 < a_min < a_max and np.isfinite(a_max)):
-        raise JaxcoagInputError("need 0 < a_min < a_max (radii in cm).")
-    if not (rho_s > 0 and rho_d > 0):
-        raise JaxcoagInputError("rho_s and rho_d must be > 0 (g cm^-3).")
+        raise JaxcoagInputError(f"need 0 < a_min < a_max, finite radii in cm (got a_min={a_min!r}, a_max={a_max!r}).")
+    for name, v in (("rho_s", rho_s), ("rho_d", rho_d)):
+        if not (np.isfinite(v) and v > 0):
+            raise JaxcoagInputError(f"{name} must be finite and > 0 g cm^-3 (got {v!r}).")
+    if not np.isfinite(q):
+        raise JaxcoagInputError(f"q must be finite (the size exponent, 3.5 for MRN); got {q!r}.")
     c = np.log(4.0 * np.pi / 3.0 * rho_s)
     lmlo, lmhi = c + 3.0 * np.log(a_min), c + 3.0 * np.log(a_max)
     if lmlo < grid.log_edges[0] or lmhi > grid.log_edges[-1]:
@@ -209,7 +218,7 @@ def exponential(m0, n0):
     """
     m0, n0 = float(m0), float(n0)
     if not (m0 > 0 and n0 > 0 and np.isfinite(m0) and np.isfinite(n0)):
-        raise JaxcoagInputError("exponential(m0, n0) needs finite m0 > 0 g and n0 > 0 cm^-3.")
+        raise JaxcoagInputError(f"exponential(m0, n0) needs finite m0 > 0 g and n0 > 0 cm^-3 (got {m0!r}, {n0!r}).")
 
     def f(m):
         return (n0 / m0) * jnp.exp(-jnp.asarray(m) / m0)

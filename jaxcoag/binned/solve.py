@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import diffrax
 import optimistix as optx
 
-from .._validate import JaxcoagInputError, check, is_traced, require_x64
+from .._validate import JaxcoagInputError, JaxcoagTypeError, check, is_traced, require_x64
 from ..kernels import AbstractKernel
 from .grid import MassGrid
 from .scheme import AbstractScheme
@@ -53,6 +53,8 @@ class RESULTS(eqx.Enumeration):
                         "rtol/atol or use an implicit solver.")
     solver_failed = ("The diffrax solver failed (step size underflow, nonlinear solver divergence or "
                      "another internal error). Try a different solver or tighter tolerances.")
+    invalid_parameters = ("A parameter of this sweep member is NaN/inf, so it was not run (jaxcoag.sweep.sweep "
+                          "with invalid='flag'). Fix that parameter value.")
 
 
 class BinnedSolution(eqx.Module):
@@ -117,8 +119,9 @@ def _validate(model, grid, n0, ts, fragmentation):
     if fragmentation is not None:
         from .fragmentation import AbstractFragmentation
         if not isinstance(fragmentation, AbstractFragmentation):
-            raise JaxcoagInputError("fragmentation must be None or a jaxcoag.binned.fragmentation model "
-                                    "(Shattering(v_frag) or ShatterToMonomers(m_frag)).")
+            raise JaxcoagInputError("fragmentation must be None or a jaxcoag.binned fragmentation model "
+                                    "(Shattering(v_frag), ShatterToMonomers(m_frag) or "
+                                    "OutcomeFragmentation(recipe, material)).")
     ts = check(ts, "ts", hint="output times in s")
     if ts.ndim != 1 or ts.shape[0] < 2:
         raise JaxcoagInputError("ts must be a 1-D array of at least 2 output times [s] (ts[0] is the initial time).")
@@ -129,7 +132,26 @@ def _validate(model, grid, n0, ts, fragmentation):
         if n0.shape != (grid.nbins,):
             raise JaxcoagInputError(f"n0 must have shape (nbins,) = ({grid.nbins},); got {n0.shape}. "
                                     "Pass a callable f(m) [cm^-3 g^-1] to project a distribution instead.")
+    if fragmentation is not None:
+        if bool(getattr(fragmentation, "needs_velocity", False)) and \
+                type(model).relative_velocity2 is AbstractKernel.relative_velocity2:
+            raise JaxcoagTypeError(
+                f"{type(fragmentation).__name__} needs collision velocities, but the {type(model).__name__} kernel has no "
+                "relative velocity (analytic kernels). Use a physical kernel from a Scene "
+                "(jaxcoag.scenes.nebula_ch4().kernel(gas, rho_s=...)), or a velocity-free fragmentation model "
+                "such as ShatterToMonomers(m_frag).")
     return n0, ts
+
+
+def _check_controls(rtol, atol, max_steps, where="solve_binned"):
+    """Tolerances (> 0, finite; concrete Python numbers or arrays) and max_steps (positive int)."""
+    rtol = check(rtol, "rtol", positive=True, hint=f"{where} relative tolerance, e.g. 1e-6")
+    atol = check(atol, "atol", positive=True, hint=f"{where} absolute tolerance relative to the total mass, "
+                                                   "e.g. 1e-10")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
+        raise JaxcoagInputError(f"max_steps must be a positive int (a static step budget, e.g. 100_000); "
+                                f"got {max_steps!r}.")
+    return rtol, atol
 
 
 def _default_dt0(scheme, grid, data, y0, t0, t1):
@@ -197,9 +219,10 @@ def solve_binned(model, grid, n0, ts, *, scheme="twobin", order=0, fragmentation
             over the bin by Gauss-Legendre in ln m; DG: its own projection).
         ts: output times [s], strictly increasing; n0 is the state at ts[0].
         scheme: "twobin" (default), "dg" (``order`` = polynomial order) or an AbstractScheme.
-        fragmentation: None, or a model from ``jaxcoag.binned.fragmentation``
-            (``Shattering(v_frag, ...)`` needs a kernel with ``relative_velocity2``;
-            ``ShatterToMonomers(m_frag)`` works with any kernel).
+        fragmentation: None, or a binned fragmentation model: ``Shattering(v_frag, ...)``,
+            ``ShatterToMonomers(m_frag)`` or ``OutcomeFragmentation(recipe, material)`` (the
+            shared collision-outcome interface). Models with ``needs_velocity`` (Shattering,
+            velocity-dependent recipes) need a kernel with ``relative_velocity2`` (a Scene kernel).
         solver: diffrax solver, or "tsit5" / "kvaerno5"; default Tsit5 (coagulation) /
             "kvaerno5" = Kvaerno5 with an optimistix Newton root finder at 1e-3 atol (fragmentation,
             and stiff post-gel product-kernel runs; its mass drift is at the Newton tolerance,
@@ -225,8 +248,17 @@ def solve_binned(model, grid, n0, ts, *, scheme="twobin", order=0, fragmentation
     Kidger (2021, diffrax); DESIGN.md §5 (solver/tolerance choices).
     """
     n0, ts = _validate(model, grid, n0, ts, fragmentation)
+    _check_controls(rtol, atol, max_steps)
     sch = make_scheme(scheme, order)
     y0 = sch.init(grid, n0)
+    if callable(n0) and not is_traced(y0):
+        if not bool(jnp.all(jnp.isfinite(y0))):
+            raise JaxcoagInputError("n0(m) projected onto the grid gives NaN/inf: the callable must return a finite "
+                                    "number density per unit mass [cm^-3 g^-1] over the whole grid (check it at "
+                                    "grid.edges).")
+        if not float(sch.total_mass(y0, grid)) > 0:
+            raise JaxcoagInputError("n0(m) projected onto the grid holds no mass: the distribution lies outside the "
+                                    "grid or is zero; widen the grid or fix the callable.")
     if not callable(n0) and not is_traced(y0):
         if not float(jnp.sum(jnp.abs(y0))) > 0:
             raise JaxcoagInputError("n0 is all zeros: there is nothing to coagulate; give a positive number density.")
@@ -297,15 +329,29 @@ def steady_state(model, grid, n0, *, fragmentation, t_relax=None, y_guess=None, 
     """
     if fragmentation is None:
         raise JaxcoagInputError("steady_state needs a fragmentation model (coagulation alone never reaches one).")
+    newton_rtol = check(newton_rtol, "newton_rtol", positive=True, hint="Newton relative tolerance, e.g. 1e-10")
+    newton_atol = check(newton_atol, "newton_atol", positive=True, hint="Newton absolute tolerance on y/M_tot, "
+                                                                      "e.g. 1e-13")
+    if isinstance(newton_steps, bool) or not isinstance(newton_steps, (int, np.integer)) or newton_steps < 1:
+        raise JaxcoagInputError(f"newton_steps must be a positive int (e.g. 50); got {newton_steps!r}.")
     sch = make_scheme(scheme, order)
     if y_guess is None:
         if t_relax is None:
             raise JaxcoagInputError("steady_state needs t_relax (relaxation time in s) or y_guess (a state).")
+        t_relax = check(t_relax, "t_relax", positive=True, hint="relaxation time in s, long enough to approach "
+                                                                "the steady state")
         ts = jnp.array([0.0, float(t_relax)])
         relax = solve_binned(jax.lax.stop_gradient(model), grid, n0, ts, scheme=sch,
                              fragmentation=jax.lax.stop_gradient(fragmentation), solver=solver, rtol=rtol,
                              atol=atol, max_steps=max_steps, throw=throw)
         y_guess = relax.ys[-1]
+    else:
+        _validate(model, grid, jnp.zeros(grid.nbins), jnp.array([0.0, 1.0]), fragmentation)
+        y_guess = check(y_guess, "y_guess", hint="a scheme state, e.g. sol.ys[-1] of a previous solve_binned")
+        want = jax.eval_shape(lambda: sch.init(grid, jnp.zeros(grid.nbins))).shape
+        if y_guess.shape != want:
+            raise JaxcoagInputError(f"y_guess must have shape {want} (the {type(sch).__name__} state, e.g. "
+                                    f"sol.ys[-1] of solve_binned on this grid); got {y_guess.shape}.")
     y_guess = jax.lax.stop_gradient(jnp.asarray(y_guess))
     return _steady_impl(sch, grid, model, fragmentation, y_guess, float(newton_rtol), float(newton_atol),
                         int(newton_steps), bool(throw))

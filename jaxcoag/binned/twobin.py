@@ -187,6 +187,10 @@ class TwoBinScheme(AbstractScheme):
         if data.frag is None:
             contrib = data.coef * P[:, None]
             out = jax.ops.segment_sum(contrib.ravel(), jnp.asarray(data.idx).ravel(), num_segments=N + 1)
+        elif getattr(data.frag, "full", False):
+            # the fragmentation data describe every collision (e.g. OutcomeFragmentation
+            # without a mixture weight): no separate sticking part
+            out = data.frag.rhs(P, N)
         else:
             pf = data.frag.p                                   # fragmenting fraction per pair
             contrib = data.coef * ((1.0 - pf) * P)[:, None]

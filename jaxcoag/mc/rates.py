@@ -19,7 +19,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-__all__ = ["n_eps", "log_rate_row", "log_rate_matrix", "row_sums"]
+__all__ = ["n_eps", "log_rate_row", "log_rate_matrix", "row_sums", "log_particle_rates"]
 
 LN2 = 0.6931471805599453
 
@@ -125,3 +125,27 @@ def row_sums(L):
     R = jnp.exp(rlog - s)
     R = jnp.where(jnp.isnan(rlog) | (rlog == jnp.inf), jnp.nan, R)
     return R, s
+
+
+def log_particle_rates(kernel, logm, psi, w, z, valid):
+    """ln of the volume-free physical collision rate of one particle of each species.
+
+    ``ln Σ_b K(m_a, m_b) g_b`` (the rate per particle is this times 1/V [s^-1]); the
+    partner sum includes the own species (g_a, not g_a - 1: the difference is irrelevant
+    where this is used, the tail zoom cap of the distribution method). O(S^2) kernel
+    evaluations, in log space (kernels of 1e300 and multiplicities of 1e160 are fine).
+
+    Returns: (S,) array, -inf on invalid slots.
+    References: spec/montecarlo.md §2.5 (runaway kernels: groups must collide on time
+    scales short compared to t_R), §3.1 (log space).
+    """
+    lg = jnp.where(valid, jnp.log(jnp.where(valid & (w > 0), w, 1.0)) + z.astype(logm.dtype) * LN2, -jnp.inf)
+
+    def one(a):
+        S = logm.shape[0]
+        la = jnp.broadcast_to(logm[a], (S,))
+        pa = jnp.broadcast_to(psi[a], psi.shape)
+        return jax.nn.logsumexp(_log_kernel(kernel, la, logm, pa, psi) + lg)
+
+    r = jax.vmap(one)(jnp.arange(logm.shape[0]))
+    return jnp.where(valid, r, -jnp.inf)

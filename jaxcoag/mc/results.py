@@ -1,7 +1,8 @@
-"""Result container of the Monte Carlo engine with binned and moment diagnostics.
+"""Result container of the Monte Carlo engine with binned, moment and largest-particle
+diagnostics, and its conversion to an ``xarray.Dataset``.
 
 References: spec/montecarlo.md §3.8 (snapshot payload), §4.1 (densities from a simulation:
-n_b = Σ_{i∈b} g_i/V, ρ_b = Σ_{i∈b} g_i m_i/V), §3.1 (log-moments).
+n_b = Σ_{i∈b} g_i/V, ρ_b = Σ_{i∈b} g_i m_i/V), §3.1 (log-moments), §0 (M_L1, M_L2).
 """
 
 from __future__ import annotations
@@ -9,8 +10,10 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .state import status_names
+from .._validate import JaxcoagInputError
+from .state import STATUS, MCState, largest_two, log_n_particles, status_names
 
 __all__ = ["MCResult"]
 
@@ -30,6 +33,13 @@ class MCResult(eqx.Module):
         M_tot: (T,) total simulated mass [g].
         n_events_snap: (T,) events executed before each snapshot.
         status: int bit flags (``jaxcoag.mc.STATUS``); n_events, n_dup, n_merge: totals.
+        t_stop: time [s] of the event after which the stop predicate fired (``run(...,
+            stop=...)``); NaN when the run did not stop that way.
+        final_state: the complete end state (``MCState`` without snapshot buffers): pass it to
+            ``run(..., resume_from=result.final_state)`` to continue the run; the continuation
+            is bitwise the same as one uninterrupted run (same backend).
+        config: static run configuration as (name, value) pairs (mode, grouping, capacity,
+            kernel and outcome class, ...), used for dataset attributes.
 
     References: Ormel (2008) thesis Table 5.4; spec/montecarlo.md §3.8.
     """
@@ -49,6 +59,9 @@ class MCResult(eqx.Module):
     n_events: jax.Array
     n_dup: jax.Array
     n_merge: jax.Array
+    t_stop: jax.Array | None = None
+    final_state: MCState | None = None
+    config: tuple = eqx.field(static=True, default=())
 
     @property
     def log_g(self):
@@ -123,3 +136,153 @@ class MCResult(eqx.Module):
         References: spec/montecarlo.md §0 (M_L1), §4.4.
         """
         return jnp.exp(jnp.max(jnp.where(self.valid, self.logm, -jnp.inf), axis=-1))
+
+    # ------------------------------------------------------------------ statistics (spec §0)
+
+    def largest_two(self, kind="particle"):
+        """(T,) masses (M_L1, M_L2) of the largest and second-largest particle [g].
+
+        Arguments: kind: "particle" (default; if the largest species has g ≥ 2 then
+            M_L2 = M_L1) or "species" (second-largest species mass).
+        Returns: two (T,) arrays (0 where no such particle exists).
+        References: spec/montecarlo.md §0, §4.7 F5.6/F5.7, §8.
+        """
+        l1, l2 = largest_two(self.logm, self.w, self.z, self.valid, kind)
+        return jnp.exp(l1), jnp.exp(l2)
+
+    def log_largest_two(self, kind="particle"):
+        """(T,) (ln M_L1, ln M_L2) [ln g]; overflow-free form of :meth:`largest_two`."""
+        return largest_two(self.logm, self.w, self.z, self.valid, kind)
+
+    @property
+    def M_L1(self):
+        """(T,) mass of the largest particle [g] (same as :meth:`largest_mass`)."""
+        return self.largest_two("particle")[0]
+
+    @property
+    def M_L2(self):
+        """(T,) mass of the second-largest particle [g] (= M_L1 if the largest species has g ≥ 2)."""
+        return self.largest_two("particle")[1]
+
+    @property
+    def log_n_particles(self):
+        """(T,) ln Np = ln Σ g_i, the number of simulated physical particles (eq. 5.9)."""
+        return log_n_particles(self.w, self.z, self.valid)
+
+    @property
+    def Ns(self):
+        """(T,) number of species (alias of ``n_species``)."""
+        return self.n_species
+
+    @property
+    def Ng(self):
+        """(T,) number of groups Σ w (alias of ``n_groups``)."""
+        return self.n_groups
+
+    @property
+    def log_M0(self):
+        """(T,) ln M0 = ln(Np / V) [ln cm^-3]."""
+        return self.log_moments(0.0)
+
+    @property
+    def log_M1(self):
+        """(T,) ln M1 = ln(M_tot / V) [ln(g cm^-3)]."""
+        return self.log_moments(1.0)
+
+    @property
+    def log_M2(self):
+        """(T,) ln M2 = ln(Σ g m^2 / V) [ln(g^2 cm^-3)] (M2 itself overflows beyond m ~ 1e154)."""
+        return self.log_moments(2.0)
+
+    # ------------------------------------------------------------------ xarray
+
+    def to_xarray(self, attrs=None, edges=None):
+        """Labelled ``xarray.Dataset`` of one run (index a vmapped result first).
+
+        Arguments:
+            attrs: optional dict of extra global attributes (scene, seed, ...); values netCDF
+                cannot hold are stored as their ``repr``.
+            edges: optional (nbins+1,) increasing mass-bin edges [g]; adds the binned view
+                ``mass_per_bin`` [g cm^-3] and ``number_per_bin`` [cm^-3] on dims (time, mass)
+                with coords ``mass`` (geometric centres) and ``mass_edge``.
+
+        Returns:
+            Dataset with dims ``time``, ``species`` (capacity slots) and ``struct`` (P);
+            variables m [g], log_g, w, z, psi, valid (time, species); V [cm^3], M_tot [g],
+            n_events, n_species, n_groups, log_n_particles, M_L1, M_L2 [g], log_M0, log_M1,
+            log_M2 (time); scalars status, n_events_total, n_dup, n_merge, t_stop [s].
+            Attributes: title, Conventions, status names, the static run configuration
+            (mode, grouping, capacity, kernel, ...) and ``attrs``. Save it with
+            :func:`jaxcoag.io.save_netcdf` (atomic).
+
+        References: CF conventions 1.10 (units, long_name); spec/montecarlo.md §3.8.
+        """
+        from ..io import _attr_value, _xr
+
+        xr = _xr()
+        if np.ndim(self.t) != 1:
+            raise JaxcoagInputError(
+                f"to_xarray takes one run (t of shape (T,)); got t of shape {np.shape(self.t)} (a vmapped batch?). "
+                "Index one member first, e.g. jax.tree_util.tree_map(lambda x: x[0], result).")
+        if attrs is not None and not isinstance(attrs, dict):
+            raise JaxcoagInputError("attrs must be a dict of str -> value (scene name, parameters).")
+
+        def a(x, dt=np.float64):
+            return np.asarray(x).astype(dt)
+
+        l1, l2 = self.largest_two("particle")
+        T = ("time",)
+        TS = ("time", "species")
+        status = int(np.asarray(self.status))
+        data = {
+            "m": (TS, a(self.m), {"units": "g", "long_name": "particle mass of each species slot"}),
+            "log_g": (TS, a(self.log_g), {"units": "1", "long_name": "ln multiplicity ln(w 2^z) (-inf on free slots)"}),
+            "w": (TS, a(self.w), {"units": "1", "long_name": "group number w (g = w 2^z)"}),
+            "z": (TS, a(self.z, np.int32), {"units": "1", "long_name": "zoom number z"}),
+            "psi": (TS + ("struct",), a(self.psi), {"units": "1", "long_name": "structural parameters"}),
+            "valid": (TS, a(self.valid, np.int8), {"units": "1", "long_name": "slot holds a species (1) or is free (0)"}),
+            "V": (T, a(self.V), {"units": "cm3", "long_name": "simulated volume"}),
+            "M_tot": (T, a(self.M_tot), {"units": "g", "long_name": "total simulated mass"}),
+            "n_events": (T, a(self.n_events_snap, np.int64), {"units": "1", "long_name": "events executed before the snapshot"}),
+            "n_species": (T, a(self.n_species, np.int64), {"units": "1", "long_name": "number of species Ns"}),
+            "n_groups": (T, a(self.n_groups), {"units": "1", "long_name": "number of groups Ng = sum w"}),
+            "log_n_particles": (T, a(self.log_n_particles), {"units": "1", "long_name": "ln of the number of physical particles Np"}),
+            "M_L1": (T, a(l1), {"units": "g", "long_name": "mass of the largest particle"}),
+            "M_L2": (T, a(l2), {"units": "g", "long_name": "mass of the second-largest particle (= M_L1 if the largest species has g >= 2)"}),
+            "log_M0": (T, a(self.log_M0), {"units": "1", "long_name": "ln number density ln M0 [ln cm-3]"}),
+            "log_M1": (T, a(self.log_M1), {"units": "1", "long_name": "ln mass density ln M1 [ln(g cm-3)]"}),
+            "log_M2": (T, a(self.log_M2), {"units": "1", "long_name": "ln second moment ln M2 [ln(g2 cm-3)]"}),
+            "status": ((), np.int32(status), {"units": "1", "long_name": "jaxcoag.mc.STATUS bit flags (0 = OK)",
+                                              "status_names": ",".join(status_names(status)) or "OK"}),
+            "n_events_total": ((), np.int64(np.asarray(self.n_events)), {"units": "1", "long_name": "events executed"}),
+            "n_dup": ((), np.int64(np.asarray(self.n_dup)), {"units": "1", "long_name": "duplications"}),
+            "n_merge": ((), np.int64(np.asarray(self.n_merge)), {"units": "1", "long_name": "species merges"}),
+            "t_stop": ((), np.float64(np.nan if self.t_stop is None else np.asarray(self.t_stop)),
+                       {"units": "s", "long_name": "time the stop predicate fired (NaN: not stopped)"}),
+        }
+        coords = {"time": ("time", a(self.t), {"units": "s", "long_name": "output time"}),
+                  "species": ("species", np.arange(np.shape(self.m)[-1], dtype=np.int32),
+                              {"units": "1", "long_name": "species slot index"})}
+        if edges is not None:
+            e = np.asarray(edges, np.float64)
+            if e.ndim != 1 or e.size < 2 or not np.all(np.isfinite(e)) or np.any(e <= 0) or np.any(np.diff(e) <= 0):
+                raise JaxcoagInputError("edges must be a 1-D, positive, strictly increasing array of >= 2 mass-bin edges in g")
+            data["mass_per_bin"] = (("time", "mass"), a(self.mass_per_bin(e)),
+                                    {"units": "g cm-3", "long_name": "dust mass density per mass bin"})
+            data["number_per_bin"] = (("time", "mass"), a(self.number_per_bin(e)),
+                                      {"units": "cm-3", "long_name": "dust number density per mass bin"})
+            coords["mass"] = ("mass", np.sqrt(e[:-1] * e[1:]), {"units": "g", "long_name": "geometric bin-center mass"})
+            coords["mass_edge"] = ("mass_edge", e, {"units": "g", "long_name": "mass-bin edges"})
+        ds = xr.Dataset(data_vars=data, coords=coords)
+        ds.attrs["title"] = "jaxcoag grouped Monte Carlo run"
+        ds.attrs["Conventions"] = "CF-1.10"
+        ds.attrs["status"] = ",".join(status_names(status)) or "OK"
+        ds.attrs["status_flags"] = ", ".join(f"{n}={getattr(STATUS, n)}" for n in
+                                            ("CAPACITY", "ZERO_RATE", "NONFINITE", "MAX_EVENTS", "STOPPED"))
+        for k, v in self.config:
+            ds.attrs[f"run_{k}"] = _attr_value(v)
+        for k, v in (attrs or {}).items():
+            if not isinstance(k, str):
+                raise JaxcoagInputError(f"attrs keys must be strings (got {k!r}).")
+            ds.attrs[k] = _attr_value(v)
+        return ds

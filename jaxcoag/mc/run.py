@@ -30,9 +30,9 @@ from .._validate import JaxcoagInputError, check, is_traced, require_x64
 from ..kernels import AbstractKernel
 from . import grouping as G
 from .outcomes import AbstractOutcome, PerfectSticking
-from .rates import log_rate_matrix, log_rate_row, n_eps, row_sums
+from .rates import log_particle_rates, log_rate_matrix, log_rate_row, n_eps, row_sums
 from .results import MCResult
-from .state import STATUS, MCState, Snapshots
+from .state import STATUS, InitialSpecies, MCState, Snapshots
 
 __all__ = ["run"]
 
@@ -61,6 +61,11 @@ class _Cfg:
     dedupe: bool
     n_rezoom: int
     leftover: str = "demagnify"
+    # > 0: distribution-method zoom cap of the heaviest species (grouping.zoom_cap_tail) with this many
+    # expected group events per elapsed time. Off by default: with 64 it brought t_R of (m_i m_j)^2 at
+    # N = 1e20 from 0.091 to 0.051 (Fig 5.7), but made the subcritical product-kernel M_L1 at t = 0.9
+    # (N = 1e20, Fig 5.6) 45x the random-graph value, so it is not validated yet.
+    tail_events: float = 0.0
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -110,6 +115,11 @@ def _fill(cfg, p, st, t_new):
 
     k, snaps = jax.lax.while_loop(cond, body, (st.k_out, st.snaps))
     return st._replace(k_out=k, snaps=snaps)
+
+
+def _ns_hi_equal_mass(cfg):
+    """Species count above which an equal-mass run merges (spec §7: 0.9 S, below the emergency level)."""
+    return min(math.floor(0.9 * cfg.capacity), cfg.capacity - cfg.n_prod - 3)
 
 
 def _stop(st, cond, flag):
@@ -275,12 +285,18 @@ def _event(cfg, p, st):
     zero = ~nonfinite & ((total <= 0) | (jnp.sum(st.valid) == 0))
     tiny = ~nonfinite & (total < 1e-100)
 
-    def do_event(st):
-        log_lam = jnp.log(total) + st.s - st.logV
-        E = -jnp.log1p(-u[0])  # Exp(1)
-        t_new = st.t + E * jnp.exp(-log_lam)
-        st = _fill(cfg, p, st, t_new)
+    proceed = ~nonfinite & ~zero & ~(tiny & ~fresh)
+    log_lam = jnp.log(jnp.where(proceed, total, 1.0)) + st.s - st.logV
+    E = -jnp.log1p(-u[0])  # Exp(1)
+    t_new = st.t + E * jnp.exp(-log_lam)
+    # snapshots first (pre-event state, spec §3.8), outside the conds below: the snapshot buffers
+    # (n_snap x S per array) are then no operand of a lax.cond, which on CPU copied them on every
+    # event (measured 116 -> 271 us/event going from 2 to 64 output times at S = 512)
+    st = _fill(cfg, p, st, jnp.where(proceed, t_new, -jnp.inf))
+    snaps = st.snaps
+    st = st._replace(snaps=None)
 
+    def do_event(st):
         def go(st):
             a = _pick(u[1], st.R)
             row = _row(cfg, p, _arrays(st), a)
@@ -302,6 +318,8 @@ def _event(cfg, p, st):
                 rez = (jnp.abs(lmax - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
             free = cfg.capacity - jnp.sum(st2.valid)
             cap = free < cfg.n_prod + 2
+            if cfg.grouping == "equal_mass":
+                cap = cap | (cfg.capacity - free > _ns_hi_equal_mass(cfg))
             dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
             st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
             return _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
@@ -309,14 +327,12 @@ def _event(cfg, p, st):
         return jax.lax.cond(st.k_out >= cfg.n_snap,
                             lambda s: s._replace(done=jnp.array(True)), go, st)
 
-    proceed = ~nonfinite & ~zero & ~(tiny & ~fresh)
-
     def no_event(st):
         st = _stop(st, nonfinite & fresh, STATUS.NONFINITE)
         st = _stop(st, zero & fresh, STATUS.ZERO_RATE)
         return st._replace(dirty=st.dirty | ~fresh)
 
-    return jax.lax.cond(proceed, do_event, no_event, st)
+    return jax.lax.cond(proceed, do_event, no_event, st)._replace(snaps=snaps)
 
 
 # ----------------------------------------------------------------------------- maintenance
@@ -334,6 +350,13 @@ def _rezoom_all(cfg, p, st):
         return st._replace(w=w, z=jnp.where(st.valid, z, 0), log_mstar=lms, zref=lms)
     xp, fp = G.distribution_nodes(st.logm, st.w, st.z, st.valid, p["log_mlo"], jnp.log(p["ns_target"]), cfg.n_bins)
     zh = G.zoom_target_distribution(st.logm, xp, fp)
+    if cfg.tail_events > 0:
+        lr = log_particle_rates(p["kernel"], st.logm, st.psi, st.w, st.z, st.valid) - st.logV
+        cap = G.zoom_cap_tail(st.w, st.z, st.valid, lr, st.t, jnp.log(p["ns_target"]), cfg.tail_events)
+        # only the high-mass front (the p_protect heaviest species) needs it; capping every species
+        # multiplied the events of the product-kernel test (N = 1e20, t = 0.7) by ~50
+        rank = jnp.argsort(jnp.argsort(jnp.where(st.valid, -st.logm, jnp.inf)))
+        zh = jnp.where(rank < cfg.p_protect, jnp.minimum(zh, cap), zh)
     w, z = G.apply_zoom(st.w, st.z, zh)
     w = jnp.where(st.valid, w, 0.0)
     lmax = jnp.max(jnp.where(st.valid, st.logm, -jnp.inf))
@@ -348,6 +371,11 @@ def _maintenance(cfg, p, st):
         ns_hi = jnp.minimum(jnp.floor(0.9 * S), p["ns_target"])
         sched = ns > ns_hi
         ns_lo = jnp.floor(0.75 * ns_hi)
+    elif cfg.grouping == "equal_mass":
+        # scheduled merge (spec §2.7, §7: Ns_hi = 0.9 S, Ns_lo = 0.7 S): the demagnification
+        # leftovers (spec §6 item 3) are merged with mass neighbours before the slots run out
+        sched = ns > _ns_hi_equal_mass(cfg)
+        ns_lo = jnp.array(float(math.floor(0.7 * S)))
     else:
         sched = jnp.array(False)
         ns_lo = jnp.array(float(S))
@@ -373,45 +401,119 @@ def _maintenance(cfg, p, st):
     return _stop(st, still_full, STATUS.CAPACITY)
 
 
-def _simulate(cfg: _Cfg, p: dict, key):
-    S, T, P = cfg.capacity, cfg.n_snap, cfg.n_struct
+def _monodisperse_state(cfg: _Cfg, p: dict, N, m0, struct0, key):
+    """Initial state: one species of N monomers of mass m0, V = N m0 / rho_d (spec §2.9)."""
+    S, P = cfg.capacity, cfg.n_struct
     f = jnp.float64
-    N = p["n_particles"]
     valid = jnp.zeros((S,), bool).at[0].set(True)
-    m = jnp.ones((S,), f).at[0].set(p["m0"])
-    logm = jnp.zeros((S,), f).at[0].set(jnp.log(p["m0"]))
-    psi = jnp.zeros((S, P), f).at[0].set(p["struct0"])
+    m = jnp.ones((S,), f).at[0].set(m0)
+    logm = jnp.zeros((S,), f).at[0].set(jnp.log(m0))
+    psi = jnp.zeros((S, P), f).at[0].set(struct0)
     w = jnp.zeros((S,), f).at[0].set(N)
     z = jnp.zeros((S,), jnp.int32)
-    M_tot = N * p["m0"]
-    logV = jnp.log(N) + jnp.log(p["m0"]) - jnp.log(p["rho_d"])
-    log_mstar = jnp.log(N) + jnp.log(p["m0"]) - jnp.log(p["ns_target"])
+    M_tot = N * m0
+    logV = jnp.log(N) + jnp.log(m0) - jnp.log(p["rho_d"])
+    log_mstar = jnp.log(N) + jnp.log(m0) - jnp.log(p["ns_target"])
     if cfg.mode != "const_v":
-        log_mstar = jnp.log(p["m0"])
+        log_mstar = jnp.log(m0)
+    return _blank_state(cfg, m, logm, psi, w, z, valid, logV, M_tot, log_mstar, key)
+
+
+def _species_state(cfg: _Cfg, p: dict, init, key):
+    """Initial state from an ``InitialSpecies`` (slots 0..Ns0-1); V given or M_tot / rho_d."""
+    S, P = cfg.capacity, cfg.n_struct
+    f = jnp.float64
+    n = init.m.shape[0]
+    valid = jnp.arange(S) < n
+    m = jnp.ones((S,), f).at[:n].set(init.m)
+    logm = jnp.zeros((S,), f).at[:n].set(jnp.log(init.m))
+    psi = jnp.zeros((S, P), f).at[:n].set(init.psi)
+    w = jnp.zeros((S,), f).at[:n].set(init.w)
+    z = jnp.zeros((S,), jnp.int32).at[:n].set(init.z)
+    lg = jnp.log(init.w) + init.z.astype(f) * LN2
+    logM = jax.nn.logsumexp(lg + jnp.log(init.m))
+    M_tot = jnp.exp(logM)
+    logV = logM - jnp.log(p["rho_d"]) if init.V is None else jnp.log(init.V)
+    log_mstar = logM - jnp.log(p["ns_target"]) if cfg.mode == "const_v" else jnp.min(jnp.log(init.m))
+    return _blank_state(cfg, m, logm, psi, w, z, valid, logV, M_tot, log_mstar, key)
+
+
+def _blank_state(cfg, m, logm, psi, w, z, valid, logV, M_tot, log_mstar, key):
+    f = jnp.float64
+    S = cfg.capacity
+    return MCState(m=m, logm=logm, psi=psi, w=w, z=z, valid=valid, R=jnp.zeros((S,), f), s=jnp.array(0.0),
+                   logV=logV, M_tot=M_tot, t=jnp.array(0.0), n_events=jnp.array(0, jnp.int64),
+                   n_since_refresh=jnp.array(0, jnp.int64), dirty=jnp.array(True), rezoom=jnp.array(True),
+                   log_mstar=log_mstar, zref=log_mstar, zoom_xp=jnp.arange(cfg.n_bins, dtype=f),
+                   zoom_fp=jnp.zeros((cfg.n_bins,), f), key=key, k_out=jnp.array(0, jnp.int32),
+                   status=jnp.array(0, jnp.int32), done=jnp.array(False), n_dup=jnp.array(0, jnp.int64),
+                   n_merge=jnp.array(0, jnp.int64), snaps=None)
+
+
+def _check_stop(cfg, p, before, after):
+    """Apply the user stop predicate after an executed event (STATUS.STOPPED)."""
+    if p.get("stop") is None:
+        return after
+    hit = (after.n_events > before.n_events) & jnp.asarray(p["stop"](after), bool)
+    return _stop(after, hit, STATUS.STOPPED)
+
+
+def _start(cfg: _Cfg, p: dict, st: MCState):
+    """Fresh snapshot buffers, k_out = 0; a resumed state that had halted (event budget spent,
+    stopped by the predicate, or out of capacity) stays halted; the stop predicate is also
+    checked on the initial state."""
+    T, S, P = cfg.n_snap, cfg.capacity, cfg.n_struct
+    f = jnp.float64
     snaps = Snapshots(m=jnp.ones((T, S), f), logm=jnp.zeros((T, S), f), psi=jnp.zeros((T, S, P), f),
                       w=jnp.zeros((T, S), f), z=jnp.zeros((T, S), jnp.int32), valid=jnp.zeros((T, S), bool),
                       logV=jnp.zeros((T,), f), M_tot=jnp.zeros((T,), f), n_events=jnp.zeros((T,), jnp.int64))
-    st = MCState(m=m, logm=logm, psi=psi, w=w, z=z, valid=valid, R=jnp.zeros((S,), f), s=jnp.array(0.0),
-                 logV=logV, M_tot=M_tot, t=jnp.array(0.0), n_events=jnp.array(0, jnp.int64),
-                 n_since_refresh=jnp.array(0, jnp.int64), dirty=jnp.array(True), rezoom=jnp.array(True),
-                 log_mstar=log_mstar, zref=log_mstar, zoom_xp=jnp.arange(cfg.n_bins, dtype=f),
-                 zoom_fp=jnp.zeros((cfg.n_bins,), f), key=key, k_out=jnp.array(0, jnp.int32),
-                 status=jnp.array(0, jnp.int32), done=jnp.array(False), n_dup=jnp.array(0, jnp.int64),
-                 n_merge=jnp.array(0, jnp.int64), snaps=snaps)
+    st = st._replace(snaps=snaps, k_out=jnp.array(0, jnp.int32), done=jnp.array(False))
+    full = (cfg.capacity - jnp.sum(st.valid) < cfg.n_prod + 2) & ((st.status & STATUS.CAPACITY) != 0)
+    halted = (st.n_events >= p["max_events"]) | ((st.status & STATUS.STOPPED) != 0) | full
+    st = st._replace(done=halted)
+    if p.get("stop") is not None:
+        st = _stop(st, ~halted & jnp.asarray(p["stop"](st), bool), STATUS.STOPPED)
+    return st
+
+
+def _simulate(cfg: _Cfg, p: dict, init):
+    """One run from ``init``: ("mono", N, m0, struct0, key), ("species", InitialSpecies, key)
+    or ("resume", MCState)."""
+    if init[0] == "mono":
+        st = _monodisperse_state(cfg, p, *init[1:])
+    elif init[0] == "species":
+        st = _species_state(cfg, p, *init[1:])
+    else:
+        st = init[1]
+    st = _start(cfg, p, st)
 
     def inner_cond(s):
         return ~s.done & ~s.dirty
 
     def outer_body(s):
-        s = _maintenance(cfg, p, s)
-        return jax.lax.while_loop(inner_cond, lambda s_: _event(cfg, p, s_), s)
+        # maintenance only when due (always true here except right after a resume, where a
+        # refresh would change R and break bitwise equality with the uninterrupted run)
+        s = jax.lax.cond(s.dirty, lambda s_: _maintenance(cfg, p, s_), lambda s_: s_, s)
+        return jax.lax.while_loop(inner_cond, lambda s_: _check_stop(cfg, p, s_, _event(cfg, p, s_)), s)
 
     st = jax.lax.while_loop(lambda s: ~s.done, outer_body, st)
     st = _fill(cfg, p, st, jnp.inf)  # remaining snapshots repeat the final state (exact for ZERO_RATE)
     sn = st.snaps
+    t_stop = jnp.where((st.status & STATUS.STOPPED) != 0, st.t, jnp.nan)
     return MCResult(t=p["t_out"], m=sn.m, logm=sn.logm, psi=sn.psi, w=sn.w, z=sn.z, valid=sn.valid,
                     V=jnp.exp(sn.logV), logV=sn.logV, M_tot=sn.M_tot, n_events_snap=sn.n_events,
-                    status=st.status, n_events=st.n_events, n_dup=st.n_dup, n_merge=st.n_merge)
+                    status=st.status, n_events=st.n_events, n_dup=st.n_dup, n_merge=st.n_merge,
+                    t_stop=t_stop, final_state=st._replace(snaps=None), config=_config_pairs(cfg, p))
+
+
+def _config_pairs(cfg: _Cfg, p: dict):
+    """Static run configuration as (name, value) pairs (MCResult.config / dataset attributes)."""
+    out = [(k, v if isinstance(v, (int, float, str, bool)) else repr(v)) for k, v in dataclasses.asdict(cfg).items()]
+    out.append(("kernel", type(p["kernel"]).__name__))
+    out.append(("outcome", type(p["outcome"]).__name__))
+    stop = p.get("stop")
+    out.append(("stop", "none" if stop is None else (repr(stop) if isinstance(stop, eqx.Module) else getattr(stop, "__name__", "callable"))))
+    return tuple((k, "none" if v is None else v) for k, v in out)
 
 
 _simulate_jit = eqx.filter_jit(_simulate)
@@ -419,23 +521,36 @@ _simulate_jit = eqx.filter_jit(_simulate)
 
 # ----------------------------------------------------------------------------- public API
 
-def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", grouping=None,
+def _int_option(name, value, lo, what, allow_none=False):
+    """Refuse a non-integer or too-small static integer option with a message naming it."""
+    if value is None and allow_none:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise JaxcoagInputError(f"`{name}` must be an integer >= {lo} ({what}); got {value!r}")
+    if int(value) < lo:
+        raise JaxcoagInputError(f"`{name}` must be >= {lo} ({what}); got {int(value)}")
+
+
+def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="const_v", grouping=None,
         ns_target=1000, f_eps=1e-3, capacity=None, outcome=None, struct0=None, max_events=10**8,
         rates="incremental", n_refresh=None, neps_rounding="ceil", controller=None, n_bins=20,
         p_protect=16, merge_weighting="mass", dedupe=True, d_max=64, d_up=2, n_rezoom=None,
-        m_lo=None, leftover="demagnify"):
-    """Grouped Monte Carlo coagulation (Ormel & Spaans 2008) of a monodisperse start.
+        m_lo=None, leftover="demagnify", initial=None, resume_from=None, stop=None):
+    """Grouped Monte Carlo coagulation (Ormel & Spaans 2008) of a monodisperse or custom start.
 
     Arguments:
         kernel: ``jaxcoag.kernels.AbstractKernel`` giving K [cm^3 s^-1]; rates use
             ``kernel.log_kernel_from_log_mass`` so masses up to and beyond 1e160 m0 work.
-        n_particles: initial number of physical particles (may be 1e160; > 0). The simulated
-            volume is V = n_particles m0 / rho_d [cm^3].
+        n_particles: initial number of physical particles of mass m0 (may be 1e160; > 0) for
+            the monodisperse start. The simulated volume is V = n_particles m0 / rho_d [cm^3].
+            Give either n_particles or ``initial``.
         m0: monomer mass [g] (> 0).
-        rho_d: dust mass density [g cm^-3] (> 0); kept fixed in const_n / const_ns.
+        rho_d: dust mass density [g cm^-3] (> 0; default 1); kept fixed in const_n / const_ns.
+            With ``initial`` carrying a volume V, rho_d = M_tot / V instead (do not give both).
         t_out: 1-D non-negative strictly increasing output times [s]; the state recorded at
             t_out[k] is the state after the last event with time ≤ t_out[k].
-        key: a ``jax.random`` key (one PRNG key per event is derived with ``fold_in``).
+        key: a ``jax.random`` key (one PRNG key per event is derived with ``fold_in``). Required
+            unless ``resume_from`` is given (then it defaults to, and must equal, the state's key).
         mode: "const_v" (fixed volume, exact mass conservation), "const_n" (one group
             duplicated per event, Smith & Matsoukas 1998; V = M_tot/rho_d) or "const_ns"
             (duplication controller keeping the species/group count near ``ns_target``).
@@ -459,6 +574,22 @@ def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", g
             (default otherwise: ``d_up`` duplications after each event while Ns < ns_target).
         n_bins: distribution-method bin count (default 20). m_lo: its lowest mass [g] (m0).
         p_protect: the most massive species never merged (default 16).
+        initial: custom initial population from ``jaxcoag.mc.initial_species(m, g | log_g | (w, z),
+            psi=..., V=...)`` instead of the monodisperse start; V defaults to M_tot / rho_d.
+            Equal-mass const_v then uses m* = M_tot / ns_target, the distribution method
+            m_lo = min(m) unless given. With grouping=None the given zooms are kept.
+        resume_from: ``result.final_state`` of an earlier run: continue that run over the new
+            ``t_out`` (its first time must not precede the state's time). Pass the same other
+            arguments as the original call (kernel, mode, grouping, ns_target, f_eps,
+            max_events, m_lo, ...; n_particles / initial are then only used for defaults): the
+            continuation equals one uninterrupted run over both time ranges bitwise (same
+            backend; event keys come from the base key and the event counter, maintenance
+            counters live in the state). ``max_events`` counts events of the whole run.
+            See also ``jaxcoag.mc.run_checkpointed``.
+        stop: optional stop predicate: a ``jaxcoag.mc.AbstractStop`` such as
+            ``jaxcoag.mc.Runaway(1e4)`` or any jittable function of the ``MCState``; checked after
+            every event; when true the run stops with ``STATUS.STOPPED``, ``result.t_stop`` is
+            the event time and later snapshots repeat the stopped state.
         merge_weighting: "mass" (default), "number" (thesis formula) or "volume".
         dedupe: add a product to an existing identical species instead of a new slot (exact).
         n_rezoom: distribution method: global rezoom every n_rezoom events (default
@@ -470,8 +601,10 @@ def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", g
 
     Returns:
         ``MCResult`` with per-snapshot species arrays, volume, ``mass_per_bin``, ``moments``,
-        ``status`` (bit flags of ``STATUS``) and event counts. Not differentiable (discrete
-        sampling); jit-compiled; batch over keys or kernel parameters with ``jax.vmap``.
+        M_L1/M_L2, ``to_xarray``, ``status`` (bit flags of ``STATUS``), event counts,
+        ``t_stop`` and ``final_state`` (for ``resume_from``). Not differentiable (discrete
+        sampling); jit-compiled; batch over keys, kernel parameters or initial states with
+        ``jax.vmap``.
 
     References: Ormel & Spaans (2008) ApJ 684, 1291 = Ormel (2008) thesis ch. 5, eqs.
         (5.6)-(5.14), (5.31)-(5.33), App. 5.B; §2.3.2 (constant-N/Ns); spec/montecarlo.md.
@@ -502,13 +635,53 @@ def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", g
     def _f(x):  # Python/numpy ints -> float before validation (check() casts int arrays lazily)
         return float(x) if isinstance(x, (int, np.integer)) and not isinstance(x, bool) else x
 
+    if resume_from is None and (n_particles is None) == (initial is None):
+        raise JaxcoagInputError("give exactly one of n_particles= (monodisperse start) or initial= "
+                                "(jaxcoag.mc.initial_species(...)), or resume_from= a result's final_state")
+    if n_particles is not None and initial is not None:
+        raise JaxcoagInputError("give either n_particles= or initial=, not both")
+    if initial is not None and not isinstance(initial, InitialSpecies):
+        raise JaxcoagInputError("`initial` must come from jaxcoag.mc.initial_species(m, g=... | log_g=... | w=..., z=...)")
+    if resume_from is not None and not (isinstance(resume_from, MCState) and resume_from.snaps is None):
+        raise JaxcoagInputError("`resume_from` must be the `final_state` of an MCResult (or a state loaded by run_checkpointed)")
+    if resume_from is not None and jnp.ndim(resume_from.t) != 0:
+        raise JaxcoagInputError("`resume_from` holds a batch of states (from a vmapped run); resume inside jax.vmap "
+                                "or index one member with jax.tree_util.tree_map(lambda x: x[i], state)")
+    if resume_from is None and key is None:
+        raise JaxcoagInputError("give `key`, a jax.random key (e.g. jax.random.key(0))")
+    if stop is not None and not callable(stop):
+        raise JaxcoagInputError("`stop` must be a jaxcoag.mc.AbstractStop (e.g. jaxcoag.mc.Runaway(1e4)) or a function of the state")
+    if not is_traced(max_events) and int(max_events) < 1:
+        raise JaxcoagInputError("`max_events` must be >= 1")
+    _int_option("capacity", capacity, 1, "the number of species slots, e.g. 8 * ns_target", allow_none=True)
+    _int_option("n_refresh", n_refresh, 1, "events between full rate refreshes (default: capacity)", allow_none=True)
+    _int_option("n_rezoom", n_rezoom, 1, "events between global rezooms (default ns_target // 16)", allow_none=True)
+    _int_option("n_bins", n_bins, 1, "the number of log-mass bins of the distribution method (default 20)")
+    _int_option("p_protect", p_protect, 0, "the number of most massive species never merged (default 16)")
+    _int_option("d_max", d_max, 1, "the most duplications per event in const_ns (default 64)")
+    _int_option("d_up", d_up, 1, "duplications after each event in const_ns (default 2)")
+    if key is not None and not (isinstance(key, jax.Array) and jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)):
+        if not (isinstance(key, jax.Array) and key.dtype == jnp.uint32 and key.shape[-1:] == (2,)):
+            raise JaxcoagInputError(f"`key` must be a jax.random key such as jax.random.key(0); got {type(key).__name__} {key!r}")
+    if initial is not None and initial.V is not None and rho_d is not None:
+        raise JaxcoagInputError("give either rho_d= or a volume V in initial_species(...), not both (rho_d = M_tot / V)")
+    if rho_d is None:
+        rho_d = 1.0
     n_particles, m0, rho_d, f_eps, ns_target = map(_f, (n_particles, m0, rho_d, f_eps, ns_target))
-    n_particles = check(n_particles, "n_particles", positive=True, hint="give the initial number of physical particles (> 0)")
+    if n_particles is not None:
+        n_particles = check(n_particles, "n_particles", positive=True, hint="give the initial number of physical particles (> 0)")
     m0 = check(m0, "m0", positive=True, hint="give the monomer mass in g (> 0)")
     rho_d = check(rho_d, "rho_d", positive=True, hint="give the dust mass density in g cm^-3 (> 0)")
     f_eps = check(f_eps, "f_eps", positive=True, hint="use a small fraction such as 1e-3")
     ns_target = check(ns_target, "ns_target", positive=True, hint="give the target number of species/groups (e.g. 1000)")
-    if not is_traced(n_particles) and not is_traced(m0):
+    if initial is not None:
+        lg0 = jnp.log(initial.w) + initial.z.astype(jnp.float64) * LN2
+        logM0 = jax.nn.logsumexp(lg0 + jnp.log(initial.m))
+        if initial.V is not None:
+            rho_d = jnp.exp(logM0 - jnp.log(initial.V))
+        if not is_traced(logM0) and float(logM0) >= math.log(1e300):
+            raise JaxcoagInputError("initial: the total mass sum(g m) must stay below 1e300 g (float64 range)")
+    if n_particles is not None and not is_traced(n_particles) and not is_traced(m0):
         if float(n_particles) * float(m0) >= 1e300:
             raise JaxcoagInputError("n_particles * m0 must stay below 1e300 g (float64 range); reduce n_particles")
         if grouping is None and float(n_particles) > 2.0 ** 53:
@@ -525,6 +698,26 @@ def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", g
     else:
         t_arr = eqx.error_if(t_arr, jnp.any(jnp.diff(t_arr) <= 0) | jnp.any(t_arr < 0),
                              "`t_out` must be >= 0 and strictly increasing")
+    if resume_from is not None:
+        S_r = int(resume_from.m.shape[-1])
+        if capacity is not None and int(capacity) != S_r:
+            raise JaxcoagInputError(f"resume_from has capacity {S_r}; drop `capacity` or pass {S_r}")
+        capacity = S_r
+        if not is_traced(resume_from.t) and not is_traced(t_arr) and float(t_arr[0]) < float(resume_from.t):
+            raise JaxcoagInputError(f"t_out[0] = {float(t_arr[0])} precedes the resumed state's time "
+                                    f"{float(resume_from.t)}; continue with later output times")
+        if key is not None and not is_traced(key) and not is_traced(resume_from.key):
+            same = np.array_equal(np.asarray(jax.random.key_data(key)), np.asarray(jax.random.key_data(resume_from.key)))
+            if not same:
+                raise JaxcoagInputError("`key` differs from the resumed state's key; pass the same key or key=None")
+        struct0 = resume_from.psi[0]
+    elif initial is not None:
+        P0 = int(initial.psi.shape[-1])
+        if P0 == 0 and kernel.n_struct > 0:
+            initial = eqx.tree_at(lambda x: x.psi, initial, jnp.zeros((initial.m.shape[0], kernel.n_struct), jnp.float64))
+        elif P0 < kernel.n_struct:
+            raise JaxcoagInputError(f"the kernel reads {kernel.n_struct} structural parameters; give initial psi with that many columns")
+        struct0 = initial.psi[0]
     if struct0 is None:
         struct0 = jnp.zeros((kernel.n_struct,), jnp.float64)
     struct0 = check(jnp.atleast_1d(jnp.asarray(struct0, jnp.float64)) if not is_traced(struct0) else struct0,
@@ -533,11 +726,13 @@ def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", g
         raise JaxcoagInputError("`struct0` must be a 1-D vector of structural parameters")
     if struct0.shape[0] < kernel.n_struct:
         raise JaxcoagInputError(f"the kernel reads {kernel.n_struct} structural parameters; give struct0 with that many entries")
+    n_init = 1 if initial is None else int(initial.m.shape[0])
     if capacity is None:
         if grouping is None:
-            if is_traced(n_particles):
-                raise JaxcoagInputError("give `capacity` when n_particles is traced (vmapped/jitted)")
-            capacity = int(min(float(n_particles), 2048)) + 8
+            n_p = n_particles if initial is None else jnp.exp(jax.nn.logsumexp(lg0))
+            if is_traced(n_p):
+                raise JaxcoagInputError("give `capacity` when the initial particle numbers are traced (vmapped/jitted)")
+            capacity = max(int(min(float(n_p), 2048)) + 8, n_init + outcome.n_products + 4)
         else:
             if is_traced(ns_target):
                 raise JaxcoagInputError("give `capacity` when ns_target is traced (vmapped/jitted)")
@@ -546,6 +741,9 @@ def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", g
     capacity = int(capacity)
     if capacity < outcome.n_products + 4:
         raise JaxcoagInputError(f"capacity must be at least {outcome.n_products + 4}")
+    if resume_from is None and capacity < n_init + outcome.n_products + 2:
+        raise JaxcoagInputError(f"capacity {capacity} cannot hold the {n_init} initial species; give capacity >= "
+                                f"{n_init + outcome.n_products + 2}")
     cfg = _Cfg(mode=mode, grouping=grouping, capacity=capacity, n_snap=int(t_arr.shape[0]),
                n_struct=int(struct0.shape[0]), n_prod=int(outcome.n_products), rates=rates,
                n_refresh=int(n_refresh if n_refresh is not None else (1 if rates == "full" else capacity)),
@@ -556,9 +754,19 @@ def run(kernel, *, n_particles, m0=1.0, rho_d=1.0, t_out, key, mode="const_v", g
                leftover=leftover)
     if rates == "full":
         cfg = dataclasses.replace(cfg, n_refresh=1)
-    p = dict(kernel=kernel, outcome=outcome, n_particles=n_particles, m0=m0, rho_d=rho_d,
-             log2_feps=jnp.log2(f_eps), ns_target=ns_target, t_out=t_arr, struct0=struct0,
-             max_events=jnp.asarray(max_events, jnp.int64),
-             log_mlo=jnp.log(m0) if m_lo is None else jnp.log(check(m_lo, "m_lo", positive=True)))
-    res = _simulate_jit(cfg, p, key)
+    if m_lo is not None:
+        log_mlo = jnp.log(check(m_lo, "m_lo", positive=True, hint="give the lowest mass of the distribution bins in g"))
+    elif initial is not None:
+        log_mlo = jnp.min(jnp.log(initial.m))
+    else:
+        log_mlo = jnp.log(m0)
+    p = dict(kernel=kernel, outcome=outcome, rho_d=rho_d, log2_feps=jnp.log2(f_eps), ns_target=ns_target,
+             t_out=t_arr, max_events=jnp.asarray(max_events, jnp.int64), log_mlo=log_mlo, stop=stop)
+    if resume_from is not None:
+        init = ("resume", resume_from)
+    elif initial is not None:
+        init = ("species", initial, key)
+    else:
+        init = ("mono", n_particles, m0, struct0, key)
+    res = _simulate_jit(cfg, p, init)
     return jax.tree_util.tree_map(lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, res)

@@ -10,12 +10,18 @@ References: Ormel (2008) thesis Table 5.4 (state vector per species); spec/monte
 
 from __future__ import annotations
 
+import abc
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-__all__ = ["STATUS", "MCState", "Snapshots", "status_names"]
+from .._validate import JaxcoagInputError, check, is_traced
+
+__all__ = ["STATUS", "MCState", "Snapshots", "status_names", "largest_two", "log_n_particles",
+           "InitialSpecies", "initial_species", "AbstractStop", "Runaway"]
 
 LN2 = float(jnp.log(2.0))
 
@@ -29,7 +35,9 @@ class STATUS:
     the final state, which is exact. NONFINITE: a non-finite total rate (kernel returned NaN
     or inf); the run stopped, later snapshots repeat the last good state. MAX_EVENTS: the
     event budget ``max_events`` was spent; later snapshots repeat that state (NOT the true
-    state at those times).
+    state at those times). STOPPED: the user stop predicate (``run(..., stop=...)``, e.g.
+    :class:`jaxcoag.mc.Runaway`) became true after an event at time ``MCResult.t_stop``; later
+    snapshots repeat the stopped state (deliberately, NOT the true state at those times).
     """
 
     OK = 0
@@ -37,12 +45,56 @@ class STATUS:
     ZERO_RATE = 2
     NONFINITE = 4
     MAX_EVENTS = 8
+    STOPPED = 16
+
+
+_NAMES = ("CAPACITY", "ZERO_RATE", "NONFINITE", "MAX_EVENTS", "STOPPED")
 
 
 def status_names(code) -> list[str]:
     """Names of the flags set in an integer status code (``[]`` means OK)."""
     code = int(code)
-    return [n for n in ("CAPACITY", "ZERO_RATE", "NONFINITE", "MAX_EVENTS") if code & getattr(STATUS, n)]
+    return [n for n in _NAMES if code & getattr(STATUS, n)]
+
+
+def log_n_particles(w, z, valid):
+    """ln Np = ln Σ_i g_i, g_i = w_i 2^{z_i}, over the last axis (overflow-free logsumexp).
+
+    References: Ormel (2008) eq. (5.9); spec/montecarlo.md §0.
+    """
+    pos = valid & (w > 0)
+    lg = jnp.where(pos, jnp.log(jnp.where(pos, w, 1.0)) + z.astype(w.dtype) * LN2, -jnp.inf)
+    return jax.nn.logsumexp(lg, axis=-1)
+
+
+def largest_two(logm, w, z, valid, kind: str = "particle"):
+    """ln M_L1 and ln M_L2, the masses of the largest and second-largest particle [ln g].
+
+    Arguments:
+        logm, w, z, valid: species arrays (any leading axes; species on the last axis).
+        kind: "particle" (default; spec §0/§6.12: if the largest species holds g ≥ 2 particles
+            then M_L2 = M_L1) or "species" (largest and second-largest *species* mass, the
+            thesis' "largest species/group" reading).
+
+    Returns:
+        (log_ML1, log_ML2); −inf where fewer than one (two) particles/species exist.
+
+    References: spec/montecarlo.md §0 (M_L1, M_L2), §4.7 F5.6/F5.7, §6 item 12, §8.
+    """
+    if kind not in ("particle", "species"):
+        raise ValueError(f"unknown kind {kind!r}; use 'particle' or 'species'")
+    lm = jnp.where(valid, logm, -jnp.inf)
+    i1 = jnp.argmax(lm, axis=-1)
+    l1 = jnp.take_along_axis(lm, i1[..., None], axis=-1)[..., 0]
+    slot = jnp.arange(lm.shape[-1]).reshape((1,) * (lm.ndim - 1) + (lm.shape[-1],))
+    others = jnp.where(slot == i1[..., None], -jnp.inf, lm)
+    l2 = jnp.max(others, axis=-1)
+    if kind == "particle":
+        w1 = jnp.take_along_axis(w, i1[..., None], axis=-1)[..., 0]
+        z1 = jnp.take_along_axis(z, i1[..., None], axis=-1)[..., 0]
+        multi = jnp.isfinite(l1) & ((z1 > 0) | (w1 >= 2.0))
+        l2 = jnp.where(multi, l1, l2)
+    return l1, l2
 
 
 class Snapshots(NamedTuple):
@@ -88,3 +140,145 @@ class MCState(NamedTuple):
     n_dup: jax.Array
     n_merge: jax.Array
     snaps: Snapshots
+
+
+# ----------------------------------------------------------------------------- initial states
+
+class InitialSpecies(eqx.Module):
+    """A custom initial population for :func:`jaxcoag.mc.run` (``initial=``); build it with
+    :func:`initial_species`.
+
+    Fields (Ns0 = number of initial species, P = structural parameters):
+        m: (Ns0,) particle mass of each species [g].
+        w: (Ns0,) group number (≥ 1); multiplicity g = w 2^z (eq. 5.8).
+        z: (Ns0,) int32 zoom number (≥ 0).
+        psi: (Ns0, P) structural parameters.
+        V: simulated volume [cm^3], or None: then V = M_tot / rho_d (``run``'s ``rho_d``).
+
+    References: Ormel (2008) eq. (5.8), Table 5.4; spec/montecarlo.md §2.1, §2.9.
+    """
+
+    m: jax.Array
+    w: jax.Array
+    z: jax.Array
+    psi: jax.Array
+    V: jax.Array | None = None
+
+
+def initial_species(m, g=None, *, log_g=None, w=None, z=None, psi=None, V=None) -> InitialSpecies:
+    """Initial population of several species for ``jaxcoag.mc.run(..., initial=...)``.
+
+    Give the multiplicities in exactly one of three ways:
+
+    * ``g``: number of physical particles per species (≥ 1); stored as w = g, z = 0 (with
+      ``grouping=None`` this is the exact species DSMC, so g should be an integer ≤ 2^53);
+    * ``log_g``: natural log of g (for g beyond 1.8e308, e.g. 1e400 monomers): stored as
+      z = max(0, ⌊log2 g⌋ − 52), w = g / 2^z;
+    * ``w`` and ``z``: the grouped representation g = w 2^z itself (w ≥ 1, integer z ≥ 0).
+      With ``grouping=None`` these zooms are kept for the whole run (products get z = 0), which
+      is how fixed-zoom tests such as the App. 5.A exactness check are set up; with a
+      grouping method the first maintenance rezooms every species (g is kept exactly).
+
+    Arguments:
+        m: (Ns0,) particle masses [g] (> 0, finite).
+        g, log_g, w, z: multiplicities, see above.
+        psi: optional (Ns0, P) structural parameters (default: P = 0, or zeros of the kernel's
+            ``n_struct`` columns, filled in by ``run``).
+        V: simulated volume [cm^3] (> 0). Default None: V = M_tot / rho_d with the ``rho_d``
+            given to ``run`` (1 g cm^-3 unless set), M_tot = Σ g m. In const_n / const_ns the
+            controller keeps the mass density M_tot / V of the initial state.
+
+    Returns:
+        :class:`InitialSpecies`.
+
+    References: Ormel (2008) eqs. (5.8)-(5.9), Table 5.4; spec/montecarlo.md §2.1, §4.8 U6.
+    """
+    given = [x is not None for x in (g, log_g)] + [w is not None or z is not None]
+    if sum(given) != 1:
+        raise JaxcoagInputError("initial_species needs exactly one of g=, log_g= or (w=, z=) for the multiplicities")
+    m = check(m, "m", positive=True, hint="give the particle mass of each species in g (> 0)")
+    m = jnp.atleast_1d(m)
+    if m.ndim != 1:
+        raise JaxcoagInputError("initial_species: `m` must be a 1-D array (one mass per species)")
+    n = m.shape[0]
+    if g is not None:
+        g = jnp.broadcast_to(check(g, "g", positive=True, hint="give the number of particles per species (>= 1)"), (n,))
+        if not is_traced(g) and np.any(np.asarray(g) < 1):
+            raise JaxcoagInputError("initial_species: every g must be >= 1 (a species holds at least one particle)")
+        w_, z_ = g, jnp.zeros((n,), jnp.int32)
+    elif log_g is not None:
+        lg = jnp.broadcast_to(check(log_g, "log_g", nonnegative=True, hint="give ln g >= 0 per species"), (n,))
+        z_ = jnp.maximum(jnp.floor(lg / LN2 + 1e-9) - 52.0, 0.0).astype(jnp.int32)
+        w_ = jnp.exp(lg - z_.astype(lg.dtype) * LN2)
+    else:
+        if w is None or z is None:
+            raise JaxcoagInputError("initial_species: give both w= and z= (g = w 2^z), or use g= / log_g=")
+        w_ = jnp.broadcast_to(check(w, "w", positive=True, hint="give group numbers w >= 1"), (n,))
+        zc = z if is_traced(z) else np.asarray(z)
+        if not is_traced(z):
+            if np.any(zc < 0) or np.any(zc != np.round(zc)) or np.any(zc > 1000):
+                raise JaxcoagInputError("initial_species: z must be integers in [0, 1000] (zoom numbers)")
+        if not is_traced(w_) and np.any(np.asarray(w_) < 1):
+            raise JaxcoagInputError("initial_species: every w must be >= 1 (demagnify: use z - 1 and 2 w)")
+        z_ = jnp.broadcast_to(jnp.asarray(zc).astype(jnp.int32), (n,))
+    if psi is None:
+        psi_ = jnp.zeros((n, 0), m.dtype)
+    else:
+        psi_ = check(psi, "psi", hint="give finite structural parameters, shape (n_species, P)")
+        if psi_.ndim == 1:
+            psi_ = psi_[:, None]
+        if psi_.ndim != 2 or psi_.shape[0] != n:
+            raise JaxcoagInputError(f"initial_species: psi must have shape ({n}, P); got {psi_.shape}")
+    V_ = None if V is None else check(V, "V", positive=True, hint="give the simulated volume in cm^3 (> 0)")
+    return InitialSpecies(m=m, w=jnp.asarray(w_, m.dtype), z=z_, psi=psi_, V=V_)
+
+
+# ----------------------------------------------------------------------------- stop predicates
+
+class AbstractStop(eqx.Module):
+    """A stop predicate for ``run(..., stop=...)``: ``__call__(state: MCState) -> bool``.
+
+    It is evaluated on the state after every event (and on the initial state); when it returns
+    True the run stops with ``STATUS.STOPPED``, ``MCResult.t_stop`` is the time of that event
+    and later snapshots repeat the stopped state. Must be jittable and vmappable (no Python
+    control flow on state values). Any plain function of the state works as well.
+    """
+
+    @abc.abstractmethod
+    def __call__(self, state: MCState):
+        """True where the run should stop."""
+
+
+class Runaway(AbstractStop):
+    """Runaway criterion: stop when M_L1/M_L2 ≥ ``ratio`` or a single particle is left.
+
+    Arguments:
+        ratio: threshold of the mass ratio of the largest to the second-largest particle
+            (default 1e4, thesis §5.3.3). M_L2 is the *particle* statistic: if the largest
+            species holds ≥ 2 particles then M_L2 = M_L1 (spec §6 item 12).
+        kind: "particle" (default) or "species" (second-largest *species*), see
+            :func:`largest_two`.
+
+    With it the runaway time t_R of Fig. 5.7 is ``MCResult.t_stop`` directly (for N = 300 the
+    ratio is unreachable and the single-particle clause decides).
+
+    References: Ormel (2008) thesis §5.3.3, Fig. 5.7; spec/montecarlo.md §4.7 F5.7, §6 item 12, §8.
+    """
+
+    log_ratio: jax.Array
+    kind: str = eqx.field(static=True)
+
+    def __init__(self, ratio=1e4, kind="particle"):
+        if kind not in ("particle", "species"):
+            raise JaxcoagInputError(f"Runaway: unknown kind {kind!r}; use 'particle' or 'species'")
+        r = check(ratio, "ratio", positive=True, hint="give the runaway mass ratio M_L1/M_L2 (> 1, e.g. 1e4)")
+        if not is_traced(r) and not float(r) > 1.0:
+            raise JaxcoagInputError("Runaway: ratio must be a finite number > 1 (e.g. 1e4)")
+        self.log_ratio = jnp.log(jnp.asarray(r, jnp.float64))  # an array leaf: other ratios (or a vmap over them) reuse the compiled run
+        self.kind = kind
+
+    def __call__(self, state: MCState):
+        """True when ln M_L1 − ln M_L2 ≥ ln ratio (two or more particles) or Np ≤ 1."""
+        l1, l2 = largest_two(state.logm, state.w, state.z, state.valid, self.kind)
+        single = log_n_particles(state.w, state.z, state.valid) < 0.5 * LN2  # Np < sqrt(2), i.e. one particle
+        return (jnp.isfinite(l2) & (l1 - l2 >= self.log_ratio)) | single

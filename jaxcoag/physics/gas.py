@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import constants as C
-from .._validate import check
+from .._validate import JaxcoagInputError, check
 
 __all__ = [
     "GasState",
@@ -107,7 +107,7 @@ def _vg_factor(vg_convention: str) -> float:
         return 1.5 ** 0.5
     if vg_convention == "sqrt(alpha)*c":
         return 1.0
-    raise ValueError(
+    raise JaxcoagInputError(
         f"unknown vg_convention {vg_convention!r}; use one of {VG_CONVENTIONS} (spec/velocities.md §0.2)"
     )
 
@@ -146,6 +146,13 @@ def midplane_state(rho_g, T, alpha, Omega, *, R=None, M_star=C.M_sun, dlnP_dlnR=
     alpha = check(alpha, "alpha", nonnegative=True, hint="alpha is the Shakura-Sunyaev parameter, e.g. 1e-4")
     Omega = check(Omega, "Omega", positive=True, hint="pass the Keplerian frequency in s^-1")
     M_star = check(M_star, "M_star", positive=True)
+    mu = check(mu, "mu", positive=True, hint="mean molecular weight in units of m_H, e.g. 2.34")
+    sigma_mol = check(sigma_mol, "sigma_mol", positive=True, hint="molecular cross-section in cm^2, e.g. 2e-15")
+    tL_factor = check(tL_factor, "tL_factor", positive=True, hint="t_L = tL_factor / Omega; 1 (ch. 4) or 2 pi")
+    nu_m_divisor = check(nu_m_divisor, "nu_m_divisor", positive=True, hint="nu_m = c_g l_mfp / divisor; 2 or 3")
+    z = check(z, "z", hint="height above the midplane in cm")
+    if dlnP_dlnR is not None:
+        dlnP_dlnR = check(dlnP_dlnR, "dlnP_dlnR", hint="midplane pressure gradient, e.g. -11/4; or None")
     vgf = _vg_factor(vg_convention)
     mu = jnp.asarray(mu, rho_g.dtype)
     c_g = jnp.sqrt(C.k_B * T / (mu * C.m_H))
@@ -243,6 +250,9 @@ def molecular_cloud(n, T=10.0, *, mu=C.mu_gas, sigma_mol=C.sigma_mol, nu_m_divis
     """
     n = check(n, "n", positive=True, hint="pass the gas number density in cm^-3 (e.g. 1e5)")
     T = check(T, "T", positive=True, hint="pass the gas temperature in K")
+    mu = check(mu, "mu", positive=True, hint="mean molecular weight in units of m_H, e.g. 2.34")
+    sigma_mol = check(sigma_mol, "sigma_mol", positive=True, hint="molecular cross-section in cm^2, e.g. 2e-15")
+    nu_m_divisor = check(nu_m_divisor, "nu_m_divisor", positive=True, hint="nu_m = c_g l_mfp / divisor; 3 (eq. 6.9)")
     rho_g = n * mu * C.m_H
     c_g = jnp.sqrt(C.k_B * T / (mu * C.m_H))
     L_J = 0.5 * jnp.sqrt(jnp.pi * c_g ** 2 / (C.G * rho_g))

@@ -1,0 +1,406 @@
+"""Run a configuration (:mod:`jaxcoag.config`) with the binned engine: the ``jaxcoag run`` job.
+
+:func:`run` validates and builds everything first (a refused run writes no file), then
+integrates segment by segment over the output times with checkpoints
+(:func:`jaxcoag.checkpoint.integrate`), saves a netCDF file (:func:`jaxcoag.io.save_netcdf`,
+atomic; global attributes record the configuration as TOML text, its hash, the scene and the
+gas state) and the standard figure panel (:func:`jaxcoag.plot.panel`) next to it, and prints a
+summary table (time, mass peak, peak radius, Stokes numbers, mass drift, solver steps).
+
+:func:`quick_config` shrinks a configuration for smoke tests (coarser grid, fewer outputs,
+looser tolerances); :func:`solution_from_dataset` turns a saved file back into a
+:class:`~jaxcoag.binned.BinnedSolution` (``jaxcoag plot``); :func:`sweep_config` runs a
+parameter sweep of a configuration (``jaxcoag sweep``).
+
+References: Stammler & Birnstiel (2022, DustPy) (run / snapshot / panel workflow);
+Birnstiel et al. (2012) fragmentation barrier St_frag = v_frag^2 / (3 alpha c_s^2).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import jax.numpy as jnp
+
+from . import config as cfgmod
+from . import constants as C
+from . import diagnostics
+from ._validate import JaxcoagInputError
+
+__all__ = ["run", "RunResult", "quick_config", "solution_from_dataset", "kernel_from_dataset", "summary_rows",
+           "format_summary", "sweep_config", "figure_path", "checkpoint_path"]
+
+
+class RunResult:
+    """What :func:`run` returns.
+
+    Attributes: solution (BinnedSolution), built (config.Built), path (netCDF or None),
+    figure (PNG path or None), checkpoint (path or None), finished (bool), wall_s [s],
+    rows (list of per-output dicts, see :func:`summary_rows`), numbers (dict of headline
+    numbers: final mass peak [g], peak radius [cm], St at the peak, max St, |mass drift|,
+    steps, result name, fragmentation-barrier estimate St_frag).
+    """
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def figure_path(nc_path: str) -> str:
+    """PNG path of the panel next to a netCDF file (run.nc -> run.png)."""
+    root, ext = os.path.splitext(nc_path)
+    return root + ".png" if ext else nc_path + ".png"
+
+
+def checkpoint_path(nc_path: str) -> str:
+    """Default checkpoint path next to the netCDF file (run.nc -> run.nc.ckpt.npz)."""
+    return nc_path + ".ckpt.npz"
+
+
+def quick_config(cfg: cfgmod.RunConfig) -> cfgmod.RunConfig:
+    """A smaller, faster version of a config for smoke tests (``--quick``): at most 3 bins per
+    decade (m_min recomputed so the monomer sits at a bin centre), at most 8 outputs and
+    rtol >= 1e-4; the physics and the time span are unchanged."""
+    raw = cfg.raw()
+    g = raw.setdefault("grid", {})
+    g["bins_per_decade"] = min(float(cfg["grid"]["bins_per_decade"]), 3.0)
+    if "m_min" in g:
+        del g["m_min"]  # recentre the monomer in the coarser grid
+    t = raw.setdefault("time", {})
+    if "t_out_yr" not in t:
+        t["n_out"] = min(int(cfg["time"]["n_out"]), 8)
+    s = raw.setdefault("solver", {})
+    s["rtol"] = max(float(cfg["solver"]["rtol"]), 1e-4)
+    return cfgmod.from_dict(raw, source=cfg.source + " (quick)")
+
+
+def _attrs(cfg, built):
+    g = built.gas
+    a = {"run_name": cfg["run"]["name"], "description": cfg["run"]["description"],
+         "config_toml": cfg.to_toml(), "config_hash": cfg.physics_hash(), "config_source": cfg.source,
+         "scene": built.scene.name, "effects": ",".join(built.scene.effect_names),
+         "gas_model": cfg["gas"]["model"], "rho_s": cfg["dust"]["rho_s"], "a0_cm": cfg["dust"]["a0"],
+         "m0_g": cfg["dust"]["m0"], "dust_to_gas": cfg["dust"]["dust_to_gas"],
+         "rho_g": float(g.rho_g), "T": float(g.T), "alpha": float(g.alpha), "c_g": float(g.c_g),
+         "Omega": float(g.Omega), "Sigma_g": float(g.Sigma_g), "R_cm": float(g.R),
+         "scheme": cfg["solver"]["scheme"], "solver_method": cfg["solver"]["method"],
+         "rtol": cfg["solver"]["rtol"], "atol": cfg["solver"]["atol"]}
+    fr = cfg["fragmentation"]
+    a["fragmentation"] = "none" if fr is None else fr["model"]
+    if fr is not None and fr["v_frag"] is not None:
+        a["v_frag"] = fr["v_frag"]
+    from . import __version__
+    a["jaxcoag_version"] = __version__
+    return a
+
+
+def st_frag(built):
+    """Fragmentation-barrier Stokes number v_frag^2 / (3 alpha c_s^2) (Birnstiel et al. 2012), or nan."""
+    fr = built.cfg["fragmentation"]
+    if fr is None or fr["v_frag"] is None or not float(built.gas.alpha) > 0:
+        return float("nan")
+    return fr["v_frag"] ** 2 / (3.0 * float(built.gas.alpha) * float(built.gas.c_g) ** 2)
+
+
+def summary_rows(sol, kernel):
+    """Per-output summary: t [yr], mass peak m_p [g], its radius a_p [cm] and St_p, the largest
+    Stokes number among bins holding > 1e-3 of the mass per ln m peak, and the mass drift."""
+    rho = np.asarray(sol.mass_per_bin)
+    grid = sol.grid
+    m = np.asarray(grid.centers)
+    st_all = np.asarray(kernel.particles(jnp.asarray(m)).st)
+    a_all = np.asarray(kernel.particles(jnp.asarray(m)).a)
+    y = rho / np.diff(grid.log_edges)
+    rows = []
+    for i in range(rho.shape[0]):
+        mp = float(diagnostics.mass_peak(rho[i], grid))
+        p = kernel.particles(jnp.asarray(mp))
+        sig = y[i] > 1e-3 * y[i].max()
+        rows.append(dict(t_yr=float(sol.ts[i]) / C.yr, m_peak=mp, a_peak=float(p.a), st_peak=float(p.st),
+                         st_max=float(st_all[sig].max()), a_max=float(a_all[sig].max()),
+                         mass_drift=float(sol.mass_drift[i])))
+    return rows
+
+
+def format_summary(res) -> str:
+    """Text table of a :class:`RunResult`."""
+    b = res.built
+    cfg = b.cfg
+    lines = [f"jaxcoag run '{cfg['run']['name']}': scene {b.scene.name} {tuple(b.scene.effect_names)}, "
+             f"{cfg['gas']['model']} gas, alpha = {float(b.gas.alpha):.3g}, rho_g = {float(b.gas.rho_g):.4g} g/cm^3, "
+             f"T = {float(b.gas.T):.4g} K",
+             f"  dust: a0 = {cfg['dust']['a0']:.3g} cm, rho_s = {cfg['dust']['rho_s']:g} g/cm^3, "
+             f"dust/gas = {cfg['dust']['dust_to_gas']:g}; grid {b.grid.nbins} bins "
+             f"({cfg['grid']['bins_per_decade']:g}/decade, {b.grid.edges[0]:.3g}..{b.grid.edges[-1]:.3g} g); "
+             + ("pure growth" if b.fragmentation is None else
+                f"fragmentation {cfg['fragmentation']['model']}"
+                + (f" v_frag = {cfg['fragmentation']['v_frag']:g} cm/s (St_frag = {st_frag(b):.3g})"
+                   if cfg['fragmentation']['v_frag'] else "")),
+             f"{'t [yr]':>10} {'m_peak [g]':>11} {'a_peak [cm]':>11} {'St_peak':>9} {'St_max':>9} "
+             f"{'mass drift':>11} {'steps':>6}"]
+    steps = np.concatenate([[0], res.seg_steps])
+    for i, r in enumerate(res.rows):
+        s = int(steps[i]) if i < steps.size else 0
+        lines.append(f"{r['t_yr']:10.4g} {r['m_peak']:11.4g} {r['a_peak']:11.4g} {r['st_peak']:9.3g} "
+                     f"{r['st_max']:9.3g} {r['mass_drift']:11.2e} {s:6d}")
+    n = res.numbers
+    lines.append(f"result: {n['result']}; {n['steps']} accepted steps ({n['rejected']} rejected) in "
+                 f"{n['segments_done']} segments; wall {res.wall_s:.1f} s"
+                 + (f" (resumed from segment {res.resumed_from})" if res.resumed_from else ""))
+    if not res.finished:
+        lines.append(f"stopped after {n['segments_done']} of {len(b.ts) - 1} segments; continue with --resume")
+    for label, p in (("netCDF", res.path), ("figure", res.figure), ("checkpoint", res.checkpoint)):
+        if p:
+            lines.append(f"{label}: {p}")
+    return "\n".join(lines)
+
+
+def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, figure=None, max_segments=None,
+        quick=False, verbose=True, save=True) -> RunResult:
+    """Run a configuration: validate, integrate with checkpoints, save netCDF + panel, summarise.
+
+    Arguments:
+        cfg: RunConfig, a TOML path, a dict or None (the built-in default, :func:`config.default`).
+        out: netCDF path (default ``[output] path``); the panel PNG goes next to it (run.png).
+        checkpoint: checkpoint path; None = ``[output] checkpoint`` or ``<out>.ckpt.npz``;
+            False = no checkpoint.
+        resume: continue from the checkpoint (refused if it belongs to another configuration).
+        progress: tqdm bar over the segments (stderr).
+        figure: save the panel (default ``[output] figure``).
+        max_segments: stop after this many new segments (resume later).
+        quick: shrink the config with :func:`quick_config` (tests, smoke runs).
+        verbose: print the summary table; save: write netCDF/PNG (False: only the checkpoint).
+
+    Returns: :class:`RunResult`. Raises JaxcoagInputError (before writing anything) for a bad
+    configuration, output path or mismatched checkpoint.
+    """
+    from . import checkpoint as ckmod
+    from . import io
+
+    t_start = time.perf_counter()
+    if cfg is None:
+        cfg = cfgmod.default()
+    elif isinstance(cfg, (str, os.PathLike)):
+        cfg = cfgmod.load(cfg)
+    elif isinstance(cfg, dict):
+        cfg = cfgmod.from_dict(cfg)
+    elif not isinstance(cfg, cfgmod.RunConfig):
+        raise JaxcoagInputError(f"cfg must be a RunConfig, a TOML path, a dict or None (got {type(cfg).__name__}).")
+    if quick:
+        cfg = quick_config(cfg)
+    built = cfgmod.build(cfg)
+    out = os.fspath(out) if out is not None else cfg["output"]["path"]
+    if not out or out.endswith(os.sep) or os.path.isdir(out):
+        raise JaxcoagInputError(f"--out must name a netCDF file (e.g. results/run.nc), got {out!r}.")
+    if figure is None:
+        figure = cfg["output"]["figure"]
+    if checkpoint is None:
+        checkpoint = cfg["output"]["checkpoint"] or checkpoint_path(out)
+    elif checkpoint is False:
+        checkpoint = None
+    else:
+        checkpoint = os.fspath(checkpoint)
+    scheme = built.scheme
+    y0 = scheme.init(built.grid, jnp.asarray(built.n0))
+    if resume and checkpoint and os.path.exists(checkpoint):  # refuse a mismatch before writing anything
+        ckmod.load_checkpoint(checkpoint, config_hash=cfg.physics_hash(), ts=built.ts, ny=int(y0.shape[0]))
+    for p in filter(None, (out, checkpoint)):
+        d = os.path.dirname(os.path.abspath(p))
+        os.makedirs(d, exist_ok=True)
+
+    seg = ckmod.integrate(built.kernel, built.grid, y0, built.ts, scheme=scheme, fragmentation=built.fragmentation,
+                          solver=built.solver, rtol=built.rtol, atol=built.atol, max_steps=built.max_steps,
+                          checkpoint=checkpoint, resume=resume, config_hash=cfg.physics_hash(), progress=progress,
+                          max_segments=max_segments, desc=f"jaxcoag run {cfg['run']['name']}")
+    sol = seg.solution
+    rows = summary_rows(sol, built.kernel)
+    from .io import result_table
+    rname = result_table()[int(np.asarray(sol.result._value))][0]
+    numbers = dict(m_peak=rows[-1]["m_peak"], a_peak=rows[-1]["a_peak"], st_peak=rows[-1]["st_peak"],
+                   st_max=rows[-1]["st_max"], max_abs_mass_drift=float(np.max(np.abs(np.asarray(sol.mass_drift)))),
+                   steps=int(sol.stats["steps"]), rejected=int(sol.stats["rejected"]), result=rname,
+                   segments_done=seg.n_segments_done, st_frag=st_frag(built), t_end_yr=rows[-1]["t_yr"])
+    path = fig = None
+    wall = time.perf_counter() - t_start
+    if save and (seg.finished or seg.failed):
+        attrs = _attrs(cfg, built)
+        attrs["wall_s"] = wall
+        attrs["segments"] = seg.n_segments_done
+        ds = io.to_xarray(sol, attrs=attrs)
+        ds["segment_steps"] = (("segment",), np.asarray(seg.seg_steps[:seg.n_segments_done], np.int64),
+                               {"units": "1", "long_name": "accepted solver steps per output interval"})
+        path = io.save_netcdf(ds, out)
+        if figure:
+            from .plot import panel
+            fig = figure_path(out)
+            where = (f"n = {cfg['gas']['n']:.3g} cm^-3 cloud core" if cfg["gas"]["model"] == "molecular_cloud"
+                     else f"alpha = {float(built.gas.alpha):.2g}, R = {float(built.gas.R) / C.AU:.3g} AU")
+            panel(sol, built.kernel, path=fig, title=f"{cfg['run']['name']}: {built.scene.name}, {where}")
+    res = RunResult(solution=sol, built=built, path=path, figure=fig, checkpoint=checkpoint, finished=seg.finished,
+                    wall_s=time.perf_counter() - t_start, rows=rows, numbers=numbers, seg_steps=seg.seg_steps,
+                    seg_wall_s=seg.seg_wall_s, resumed_from=seg.resumed_from, failed=seg.failed)
+    if verbose:
+        print(format_summary(res))
+    return res
+
+
+# ------------------------------------------------------------------ reading saved runs back
+def solution_from_dataset(ds):
+    """A :class:`~jaxcoag.binned.BinnedSolution` from a dataset written by :func:`run` /
+    :func:`jaxcoag.io.save_netcdf` (``ys`` holds mass per bin and the gel mass)."""
+    from .binned import BinnedSolution, MassGrid, RESULTS
+    from .io import result_table
+
+    need = ("mass_per_bin", "number_per_bin", "gel_mass", "mass_drift", "time", "mass_edge")
+    miss = [k for k in need if k not in ds.variables]
+    if miss:
+        raise JaxcoagInputError(f"this netCDF file is not a jaxcoag binned solution (missing {miss}).")
+    if ds["mass_per_bin"].ndim != 2:
+        raise JaxcoagInputError(f"this file holds {ds['mass_per_bin'].ndim - 2} extra dimension(s) "
+                                f"{list(ds['mass_per_bin'].dims[:-2])} (a sweep?); select one member first, e.g. "
+                                "ds.isel(alpha=0), or plot a file written by `jaxcoag run`.")
+    grid = MassGrid.from_edges(np.asarray(ds["mass_edge"].values))
+    code = int(ds["result_code"].values) if "result_code" in ds else 0
+    name = result_table().get(code, ("successful",))[0]
+    rho = jnp.asarray(ds["mass_per_bin"].values)
+    gel = jnp.asarray(ds["gel_mass"].values)
+    steps = int(ds["steps"].values) if "steps" in ds else 0
+    rej = int(ds["rejected_steps"].values) if "rejected_steps" in ds else 0
+    return BinnedSolution(ts=jnp.asarray(ds["time"].values), ys=jnp.concatenate([rho, gel[:, None]], axis=1),
+                          mass_per_bin=rho, number_per_bin=jnp.asarray(ds["number_per_bin"].values), gel_mass=gel,
+                          mass_drift=jnp.asarray(ds["mass_drift"].values), result=getattr(RESULTS, name),
+                          stats={"steps": jnp.asarray(steps), "rejected": jnp.asarray(rej),
+                                 "num_steps": jnp.asarray(steps + rej)}, grid=grid)
+
+
+def kernel_from_dataset(ds):
+    """The physical kernel recorded in a run file's ``config_toml`` attribute, or None."""
+    text = ds.attrs.get("config_toml")
+    if not text:
+        return None
+    cfg = cfgmod.loads(str(text), source="netCDF attribute config_toml")
+    scene = cfgmod.make_scene(cfg)
+    return scene.kernel(cfgmod.make_gas(cfg["gas"]), rho_s=cfg["dust"]["rho_s"])
+
+
+# ------------------------------------------------------------------------------ sweeps
+def _sweep_name(name):
+    """'alpha' or 'gas.alpha' -> ('gas.alpha', 'alpha'); checked against config.SWEEPABLE."""
+    by_key = {s.split(".")[1]: s for s in cfgmod.SWEEPABLE}
+    dotted = name if "." in name else by_key.get(name)
+    if dotted not in cfgmod.SWEEPABLE:
+        import difflib
+        m = difflib.get_close_matches(name, list(by_key) + list(cfgmod.SWEEPABLE), n=1)
+        raise JaxcoagInputError(f"cannot sweep {name!r}; sweepable parameters: {sorted(by_key)} (or section.key)."
+                                + (f" Did you mean {m[0]!r}?" if m else ""))
+    return dotted, dotted.split(".")[1]
+
+
+def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=None):
+    """Sweep scalar parameters of a configuration (outer product) in one compiled program.
+
+    Arguments:
+        cfg: RunConfig / TOML path / dict / None (default run).
+        params: dict name -> list of values; names are keys of :data:`config.SWEEPABLE`
+            ("alpha", "v_frag", "rho_s", ... or "gas.alpha"). Every member is validated as a
+            config first (a bad value is refused before any computation). Sweeping rho_s keeps
+            the monomer *mass* (so the grid) fixed.
+        chunk: members integrated at once (``jaxcoag.sweep.sweep`` chunk; 1 = one after the
+            other, each with its own adaptive steps - implicit solvers batch poorly, DESIGN §5).
+        quick: shrink the config first (:func:`quick_config`); out: netCDF path to save.
+
+    Returns: (xarray.Dataset, list of row dicts). The dataset holds mass_per_bin (params...,
+    time, mass), status per member, ``mass_peak`` [g] at the last output time, and the config.
+    """
+    from . import io
+    from . import sweep as swmod
+
+    if cfg is None:
+        cfg = cfgmod.default()
+    elif isinstance(cfg, (str, os.PathLike)):
+        cfg = cfgmod.load(cfg)
+    elif isinstance(cfg, dict):
+        cfg = cfgmod.from_dict(cfg)
+    if quick:
+        cfg = quick_config(cfg)
+    if not params:
+        raise JaxcoagInputError("give at least one --param name=v1,v2,... to sweep.")
+    params = dict(params)
+    names = {}
+    for k, vals in params.items():
+        dotted, short = _sweep_name(k)
+        if short in names.values():
+            raise JaxcoagInputError(f"parameter {short!r} given twice.")
+        vals = [float(v) for v in vals]
+        if not vals:
+            raise JaxcoagInputError(f"parameter {k!r} has no values.")
+        for v in vals:  # every member must be a valid config
+            cfgmod.build(cfg.replace(**{dotted: v}))
+        names[dotted] = short
+        params[k] = vals
+    built = cfgmod.build(cfg)
+    frag0 = cfg["fragmentation"]
+    if any(d.startswith("fragmentation.") for d in names) and frag0 is None:
+        raise JaxcoagInputError("the config has no [fragmentation] section; nothing to sweep there.")
+    rho_g0 = float(built.gas.rho_g)
+    n_unit = np.asarray(built.n0) / (cfg["dust"]["dust_to_gas"] * rho_g0)  # per unit dust density
+    scene = built.scene
+    grid = built.grid
+    ts = jnp.asarray(built.ts)
+    so = cfg["solver"]
+    solver = built.solver
+    dotted_of = {v: k for k, v in names.items()}
+
+    def fn(**kw):
+        over = {s: {} for s in ("gas", "dust", "fragmentation")}
+        for short, v in kw.items():
+            s, k = dotted_of[short].split(".")
+            over[s][k] = v
+        gas = cfgmod.make_gas(cfg["gas"], **over["gas"])
+        du = dict(cfg["dust"], **over["dust"])
+        kern = scene.kernel(gas, rho_s=du["rho_s"])
+        n0 = jnp.asarray(n_unit) * (du["dust_to_gas"] * gas.rho_g)
+        frag = cfgmod.make_fragmentation(frag0, **over["fragmentation"])
+        from .binned import solve_binned
+        return solve_binned(kern, grid, n0, ts, scheme=so["scheme"], order=so["order"], fragmentation=frag,
+                            solver=solver, rtol=so["rtol"], atol=so["atol"], max_steps=so["max_steps"], throw=False)
+
+    sweep_params = {names[_sweep_name(k)[0]]: np.asarray(v) for k, v in params.items()}
+    attrs = {"config_toml": cfg.to_toml(), "config_hash": cfg.physics_hash(), "scene": scene.name,
+             "swept": ",".join(names[d] for d in names)}
+    t0 = time.perf_counter()
+    ds = swmod.sweep(fn, sweep_params, chunk=chunk, attrs=attrs)
+    wall = time.perf_counter() - t0
+    rho_last = ds["mass_per_bin"].isel(time=-1).values
+    flat = rho_last.reshape(-1, rho_last.shape[-1])
+    mp = np.array([float(diagnostics.mass_peak(r, grid)) if np.all(np.isfinite(r)) else np.nan for r in flat])
+    pdims = tuple(sweep_params)
+    ds["mass_peak"] = (pdims, mp.reshape(rho_last.shape[:-1]),
+                       {"units": "g", "long_name": "mass peak at the last output time"})
+    ds.attrs["wall_s"] = wall
+    from .io import result_table
+    table = result_table()
+    rows = []
+    mesh = np.meshgrid(*[sweep_params[k] for k in pdims], indexing="ij")
+    status = ds["status"].values.ravel()
+    drift = ds["mass_drift"].isel(time=-1).values.ravel()
+    for i in range(mp.size):
+        row = {k: float(m.ravel()[i]) for k, m in zip(pdims, mesh)}
+        row.update(status=table[int(status[i])][0], m_peak=float(mp[i]), mass_drift=float(drift[i]))
+        rows.append(row)
+    path = None
+    if out is not None:
+        out = os.fspath(out)
+        os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+        path = io.save_netcdf(ds, out)
+    if verbose:
+        hdr = " ".join(f"{k:>12}" for k in pdims) + f" {'status':>18} {'m_peak [g]':>11} {'mass drift':>11}"
+        print(f"jaxcoag sweep of '{cfg['run']['name']}' over {list(pdims)}: {mp.size} members, "
+              f"t_end = {float(built.ts[-1]) / C.yr:.4g} yr, {wall:.1f} s")
+        print(hdr)
+        for r in rows:
+            print(" ".join(f"{r[k]:12.4g}" for k in pdims) + f" {r['status'] or 'successful':>18} "
+                  f"{r['m_peak']:11.4g} {r['mass_drift']:11.2e}")
+        print(f"{int(ds.attrs['n_failed'])} failed" + (f"; saved {path}" if path else ""))
+    return ds, rows

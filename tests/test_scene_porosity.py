@@ -1,0 +1,193 @@
+"""Porosity in the physical kernel: Scene(porosity="psi") (thesis ch. 2 eqs. 2.4, 2.6, 2.25).
+
+Checks: geometric radius / area / Epstein friction time against hand-computed values and the
+T-Tab2.2 rows of spec/collisions.md §1.1 (G1), psi = 1 reproduces the compact scene exactly,
+scalings a ∝ psi^(1/3), A ∝ psi^(2/3), tau_f ∝ psi^(-2/3), gradients in log psi and log gas
+parameters vs central finite differences, jit/vmap equivalence, the W84 legacy effect, the
+ch. 2 presets and the rain-out kernel wrapper.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxcoag import Scene, constants as C, effects as E, scenes
+from jaxcoag.mc.recipe_outcome import RainOutKernel
+from jaxcoag.physics import gas as G
+from jaxcoag.physics import turbulence as T
+
+GAS = G.mmsn_hayashi81(C.AU, 1e-4, tL_factor=2 * math.pi)
+M = jnp.array([1.2566e-14, 3e-12, 1e-9, 1e-6, 1e-3, 1.4])
+
+
+def _porous(*vel, regime="auto"):
+    return Scene(velocities=tuple(vel) or (E.Brownian(), E.TurbulenceOC07()), porosity="psi", drag_regime=regime)
+
+
+def _compact(*vel, regime="auto"):
+    return Scene(velocities=tuple(vel) or (E.Brownian(), E.TurbulenceOC07()), drag_regime=regime)
+
+
+@pytest.mark.parametrize("m, psi, rho_s, a_ref, rtol", [
+    (1.4, 86.0, 3.0, 2.12392, 1e-5),      # G1 (R1Ta4-P); T-Tab2.2 lists 2.1
+    (1.4e-2, 110.0, 1.0, 0.716, 2e-3),    # R5Ta4-P (table 0.72)
+    (1.6e3, 3.9, 3.0, 7.92, 2e-3),        # R1Ta2-P (table 7.8)
+    (1.9e-4, 1.0, 3.0, 0.02473, 1e-3),    # R1Ta4-C (table 2.4e-2)
+])
+def test_geometric_radius_area_and_epstein_time_by_hand(m, psi, rho_s, a_ref, rtol):
+    K = _porous(regime="epstein").kernel(GAS, rho_s=rho_s)
+    p = K.particles(jnp.asarray(m), jnp.asarray([psi]))
+    a_star = (3 * m / (4 * math.pi * rho_s)) ** (1 / 3)
+    np.testing.assert_allclose(float(p.a), a_ref, rtol=rtol)
+    np.testing.assert_allclose(float(p.a), a_star * psi ** (1 / 3), rtol=1e-13)
+    np.testing.assert_allclose(float(p.area), math.pi * a_star ** 2 * psi ** (2 / 3), rtol=1e-13)
+    # thesis eq. 2.25: tau_f = rho_s a* / (c_g rho_g psi^(2/3))
+    tau_ref = rho_s * a_star / (float(GAS.c_g) * float(GAS.rho_g) * psi ** (2 / 3))
+    np.testing.assert_allclose(float(p.tau_f), tau_ref, rtol=1e-12)
+    np.testing.assert_allclose(float(p.st), tau_ref / float(GAS.t_L), rtol=1e-12)
+
+
+def test_psi_scalings_and_cross_section():
+    K = _porous(regime="epstein").kernel(GAS, rho_s=3.0)
+    m = jnp.asarray(1e-6)
+    p1 = K.particles(m, jnp.array([1.0]))
+    p8 = K.particles(m, jnp.array([8.0]))
+    np.testing.assert_allclose(float(p8.a / p1.a), 2.0, rtol=1e-13)       # a ∝ psi^(1/3)
+    np.testing.assert_allclose(float(p8.area / p1.area), 4.0, rtol=1e-13)  # A ∝ psi^(2/3)
+    np.testing.assert_allclose(float(p8.tau_f / p1.tau_f), 0.25, rtol=1e-13)  # tau_f ∝ psi^(-2/3)
+    # Brownian-only kernel: Delta v independent of psi, sigma = pi (a1 + a2)^2
+    Kb = _porous(E.Brownian()).kernel(GAS, rho_s=3.0)
+    m1, m2 = jnp.asarray(1e-12), jnp.asarray(3e-12)
+    x1, x2 = jnp.array([27.0]), jnp.array([8.0])
+    a1 = (3 * 1e-12 / (4 * math.pi * 3.0)) ** (1 / 3) * 3.0
+    a2 = (3 * 3e-12 / (4 * math.pi * 3.0)) ** (1 / 3) * 2.0
+    dv = math.sqrt(8 * C.k_B * float(GAS.T) / math.pi * (1 / 1e-12 + 1 / 3e-12))
+    np.testing.assert_allclose(float(Kb(m1, m2, x1, x2)), math.pi * (a1 + a2) ** 2 * dv, rtol=1e-12)
+
+
+@pytest.mark.parametrize("vel", [(E.Brownian(), E.TurbulenceOC07()), (E.Brownian(), E.TurbulenceW84()),
+                                 (E.Brownian(), E.TurbulenceOC07(), E.RadialDrift())])
+def test_psi_one_equals_compact_scene(vel):
+    Kp = _porous(*vel).kernel(GAS, rho_s=3.0)
+    Kc = _compact(*vel).kernel(GAS, rho_s=3.0)
+    x = jnp.ones((M.shape[0], 1))
+    np.testing.assert_array_equal(np.asarray(Kp.matrix(M, x)), np.asarray(Kc.matrix(M)))
+    kp, dvp = Kp.matrix_and_dv2(M, x)
+    kc, dvc = Kc.matrix_and_dv2(M)
+    np.testing.assert_array_equal(np.asarray(dvp), np.asarray(dvc))
+    np.testing.assert_array_equal(np.asarray(Kp(M[:, None], M[None, :], x[:, None, :], x[None, :, :])), np.asarray(kc))
+    np.testing.assert_array_equal(np.asarray(Kp.relative_velocity2(M[1], M[4], x[1], x[4])),
+                                  np.asarray(Kc.relative_velocity2(M[1], M[4])))
+    # the MC engine path (log kernel from log masses, (S,) masses with (S, 1) structure)
+    np.testing.assert_allclose(np.asarray(Kp.log_kernel_from_log_mass(jnp.log(M), jnp.log(M[::-1]), x, x)),
+                               np.asarray(jnp.log(Kc(M, M[::-1]))), rtol=1e-13)
+
+
+def test_n_struct_and_compact_scene_ignores_x_without_porosity_ops():
+    Kp = _porous().kernel(GAS, rho_s=3.0)
+    Kc = _compact().kernel(GAS, rho_s=3.0)
+    assert Kp.n_struct == 1 and Kc.n_struct == 0
+    assert isinstance(Scene(velocities=(E.Brownian(),), porosity=E.EnlargementFactor()).porosity, E.EnlargementFactor)
+    x = jnp.full((M.shape[0], 1), 50.0)
+    np.testing.assert_array_equal(np.asarray(Kc.matrix(M, x)), np.asarray(Kc.matrix(M)))
+    # no porosity op is traced for a compact scene: the jaxpr is identical with or without x
+    n_x = len(jax.make_jaxpr(lambda m, x: Kc.matrix(m, x))(M, x).jaxpr.eqns)
+    n_0 = len(jax.make_jaxpr(lambda m: Kc.matrix(m))(M).jaxpr.eqns)
+    assert n_x == n_0
+    # the porous kernel costs a few more ops (the cube root and product), not a different program
+    n_p = len(jax.make_jaxpr(lambda m, x: Kp.matrix(m, x))(M, x).jaxpr.eqns)
+    assert n_0 < n_p <= n_0 + 12
+
+
+def test_bad_porosity_inputs_say_what_to_change():
+    with pytest.raises(ValueError, match="unknown porosity 'fluffy'"):
+        Scene(velocities=(E.Brownian(),), porosity="fluffy")
+    with pytest.raises(TypeError, match="porosity model"):
+        Scene(velocities=(E.Brownian(),), porosity=3.0)
+    Kp = _porous().kernel(GAS, rho_s=3.0)
+    with pytest.raises(TypeError, match="pass the structural parameters"):
+        Kp.matrix(M)
+    with pytest.raises(TypeError, match="trailing axis"):
+        Kp.particles(M, jnp.ones((M.shape[0], 0)))
+
+
+def test_gradients_in_log_psi_and_log_gas_parameters_vs_fd():
+    m1, m2 = 1e-9, 1e-6
+
+    def logk(lp):
+        gas = G.midplane_state(jnp.exp(lp[2]), 280.0, jnp.exp(lp[3]), 2e-7)
+        K = _porous().kernel(gas, rho_s=3.0)
+        return jnp.log(K(m1, m2, jnp.exp(lp[0:1]), jnp.exp(lp[1:2])))
+
+    lp0 = jnp.array([math.log(30.0), math.log(3.0), math.log(8e-10), math.log(1e-4)])
+    g = jax.grad(logk)(lp0)
+    h = 1e-5
+    fd = np.array([(logk(lp0.at[i].add(h)) - logk(lp0.at[i].add(-h))) / (2 * h) for i in range(4)])
+    assert np.all(np.isfinite(np.asarray(g)))
+    np.testing.assert_allclose(np.asarray(g), fd, rtol=2e-6, atol=1e-9)
+    assert abs(float(g[0])) > 1e-3  # psi really enters (area and friction time)
+
+
+def test_jit_and_vmap_over_psi():
+    K = _porous().kernel(GAS, rho_s=3.0)
+    psis = jnp.array([1.0, 3.0, 30.0, 300.0])
+
+    def kmat(p):
+        return K.matrix(M, jnp.full((M.shape[0], 1), p))
+
+    loop = jnp.stack([kmat(p) for p in psis])
+    np.testing.assert_allclose(np.asarray(jax.vmap(kmat)(psis)), np.asarray(loop), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(jax.jit(kmat)(psis[2])), np.asarray(loop[2]), rtol=1e-12)
+
+
+def test_w84_effect_matches_the_legacy_fits():
+    K = Scene(velocities=(E.TurbulenceW84(),)).kernel(GAS, rho_s=3.0)
+    p = K.particles(M)
+    dv = T.dv_turbulent_w84(p.tau_f[:, None], p.tau_f[None, :], GAS.t_s, GAS.t_L, GAS.v_s, GAS.v_L)
+    np.testing.assert_allclose(np.asarray(K.relative_velocity2(M[:, None], M[None, :])), np.asarray(dv) ** 2, rtol=1e-13)
+    # small-particle branch by hand: v_s (tau1 - tau2)/t_s
+    t1, t2 = float(p.tau_f[3]), float(p.tau_f[1])
+    assert t1 < float(GAS.t_s)
+    np.testing.assert_allclose(float(jnp.sqrt(K.relative_velocity2(M[3], M[1]))),
+                               float(GAS.v_s) * (t1 - t2) / float(GAS.t_s), rtol=1e-12)
+
+
+def test_ch2_presets_gas_and_rain_out_kernel():
+    sp, sc = scenes.get("ch2_porous"), scenes.get("ch2_compact")
+    assert sp.effect_names == ("brownian", "turbulence_w84") == sc.effect_names
+    assert sp.porosity is not None and sc.porosity is None
+    assert scenes.get("ch2_porous", method="exact").effect_names == ("brownian", "turbulence")
+    st = scenes.ch2_setup(1, 1e-4, True)
+    gas = st["gas"]
+    # z = H_g: density e^-1/2 of the Hayashi midplane; t_L = 2 pi / Omega; v_L = alpha^1/2 c_g
+    mid = G.mmsn_hayashi81(C.AU, 1e-4)
+    np.testing.assert_allclose(float(gas.rho_g), float(mid.rho_g) * math.exp(-0.5), rtol=1e-12)
+    np.testing.assert_allclose(float(gas.t_L * gas.Omega), 2 * math.pi, rtol=1e-12)
+    np.testing.assert_allclose(float(gas.v_L), 1e-2 * float(gas.c_g), rtol=1e-12)
+    np.testing.assert_allclose(st["rho_d"], float(gas.rho_g) / 240.0, rtol=1e-12)
+    np.testing.assert_allclose(st["tau_rain"], 1e-4 / float(gas.Omega), rtol=1e-12)
+    np.testing.assert_allclose(st["m0"], 1.2566e-14, rtol=1e-4)  # ch2-quartz monomer (spec §2.4)
+    assert st["name"] == "R1Ta4-P" and st["reference"]["psi"] == 86.0
+    st5 = scenes.ch2_setup(5, 1e-6, True)
+    assert st5["name"] == "R5Ta6-P" and st5["reference"]["m"] == 4.6e-10
+    np.testing.assert_allclose(st5["rho_d"], float(st5["gas"].rho_g) / 57.0, rtol=1e-12)
+    np.testing.assert_allclose(st5["m0"], 4.1888e-15, rtol=1e-4)
+    # the rain-out kernel zeroes exactly the pairs with a particle beyond tau_rain
+    K = st["kernel"]
+    assert isinstance(K, RainOutKernel)
+    m = jnp.array([1e-6, 1e-2, 10.0, 1e3])
+    x = jnp.full((4, 1), 86.0)
+    tau = K.base.particles(m, x).tau_f
+    gone = np.asarray(tau > st["tau_rain"])
+    assert gone.tolist() == [False, False, True, True]
+    k = np.asarray(K.matrix(m, x))
+    kb = np.asarray(K.base.matrix(m, x))
+    mask = gone[:, None] | gone[None, :]
+    assert np.all(k[mask] == 0.0) and np.all(k[~mask] == kb[~mask]) and np.all(kb > 0)
+    lk = np.asarray(K.log_kernel_from_log_mass(jnp.log(m), jnp.log(m[::-1]), x, x))
+    assert np.all(np.isneginf(lk[gone | gone[::-1]])) and np.all(np.isfinite(lk[~(gone | gone[::-1])]))
+    with pytest.raises(ValueError, match="R_au must be 1"):
+        scenes.ch2_setup(3, 1e-4, True)

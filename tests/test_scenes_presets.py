@@ -1,0 +1,113 @@
+"""Complete seed settings (``jaxcoag.scenes.setup``): effects named, gas numbers vs the spec,
+material energies, initial states, published reference rows, clear errors."""
+
+import numpy as np
+import pytest
+import jax.numpy as jnp
+
+from jaxcoag import scenes
+from jaxcoag._validate import JaxcoagInputError
+from jaxcoag.binned.outcome import O09Recipe, OutcomeFragmentation
+
+YR = 3.15576e7
+
+
+def test_every_setup_builds_and_names_only_its_effects():
+    expect = {"ch2_compact_1au": ("brownian", "turbulence_w84"), "ch2_compact_5au": ("brownian", "turbulence_w84"),
+              "ch4_nebula": ("brownian", "turbulence", "radial_drift"), "ch6_cloud": ("brownian", "turbulence"),
+              "ch5_constant": (), "ch5_sum": (), "ch5_product": ()}
+    assert set(scenes.SETUPS) == set(expect)
+    for name, eff in expect.items():
+        s = scenes.setup(name)
+        assert s.effect_names == eff, name
+        assert s.n0.shape == (s.grid.nbins,) and np.all(s.n0 >= 0) and s.ts[0] == 0.0
+        assert np.all(np.diff(s.ts) > 0)
+
+
+def test_ch6_standard_core_numbers_match_spec():
+    s = scenes.setup("ch6_cloud")  # n = 1e5, ice, a0 = 0.1 um
+    p = s.params
+    # spec/velocities.md §7 reference values and spec/collisions.md §11.4 (thesis digits)
+    np.testing.assert_allclose(p["c_g"], 1.8776e4, rtol=1e-4)
+    np.testing.assert_allclose(p["Re"], 6.1756e7, rtol=1e-3)
+    np.testing.assert_allclose(p["tau0_yr"], 114.20, rtol=1e-3)       # thesis 1.1e2
+    np.testing.assert_allclose(p["dv0"], 833.88, rtol=1e-3)           # thesis 8.3e2 (eq. 6.15)
+    np.testing.assert_allclose(p["t_coll0_yr"], 8.5e4, rtol=0.02)     # thesis 8.5e4 (eq. 6.16)
+    np.testing.assert_allclose(p["f_monomer0"], 3.526e-7, rtol=1e-3)  # f(N=1, t=0)
+    np.testing.assert_allclose(p["kappa0"], 2.83e4, rtol=1e-3)        # 3/(4 rho0 a0)
+    np.testing.assert_allclose(p["t_ff"] / YR, 1.0637e5, rtol=1e-3)
+    np.testing.assert_allclose(p["t_ad"] / YR, 3.7e6, rtol=1e-12)
+    # ice-coated silicate monomer pair energies (spec §2.4): E_br = 4.1114e-7, E_roll = 2.1911e-8 erg
+    np.testing.assert_allclose(p["e_break"], 4.1114e-7, rtol=1e-3)
+    np.testing.assert_allclose(p["e_roll"], 2.1911e-8, rtol=1e-3)
+    np.testing.assert_allclose(p["m0"], 1.1100e-14, rtol=1e-3)
+    # initial state: all dust mass in the monomer bin, dust-to-gas 1/100
+    np.testing.assert_allclose(np.sum(s.n0 * s.grid.centers), p["rho_g"] / 100.0, rtol=1e-12)
+    np.testing.assert_allclose(s.grid.centers[0], p["m0"], rtol=1e-12)
+    # outputs at the T-Tab6.5 epochs, reference = the like-for-like compact row
+    for t in (1e4, 1e5, 1e6, 1e7):
+        assert np.min(np.abs(s.ts / YR - t)) < 1e-6 * t
+    assert s.reference["row"] == "compact" and s.reference["a_m"][3] == 5.8e-3 and s.reference["kappa"][3] == 1.9e3
+    assert isinstance(s.fragmentation, OutcomeFragmentation) and isinstance(s.fragmentation.recipe, O09Recipe)
+    assert "SURROGATE" in s.notes
+
+
+def test_ch6_density_material_scalings():
+    sil = scenes.setup("ch6_cloud", n=1e7, material="silicate", outcome="sticking")
+    np.testing.assert_allclose(sil.params["e_break"], 1.1956e-9, rtol=1e-3)   # spec §2.4 ch6-silicate
+    np.testing.assert_allclose(sil.params["e_roll"], 1.4804e-9, rtol=1e-3)
+    np.testing.assert_allclose(sil.params["t_ad"] / YR, 3.7e6 * 10 ** -1, rtol=1e-12)
+    std = scenes.setup("ch6_cloud")
+    # t_ff ∝ n^-1/2; tau_0 ∝ 1/rho_g
+    np.testing.assert_allclose(sil.params["t_ff"] / std.params["t_ff"], 0.1, rtol=1e-12)
+    np.testing.assert_allclose(sil.params["tau0"] / std.params["tau0"], 0.01, rtol=1e-12)
+    assert sil.fragmentation is None and sil.reference == {}  # no n = 1e7 silicate row in T-Tab6.5
+    assert scenes.setup("ch6_cloud", n=1e6, material="silicate").reference["a_m"][0] == 1.4e-5
+
+
+def test_ch4_nebula_gas_and_initial_state():
+    s = scenes.setup("ch4_nebula")
+    p, ref = s.params, s.reference
+    for k, rtol in (("rho_g", 0.02), ("c_g", 0.01), ("l_mfp", 0.01), ("T", 0.01), ("eta", 0.02),
+                    ("t_L_yr", 0.01), ("t_s", 0.01)):
+        np.testing.assert_allclose(p[k], ref["gas"][k], rtol=rtol, err_msg=k)
+    np.testing.assert_allclose(p["a_m_chondrules"], 0.072, rtol=0.01)  # <a>_m = 720 um
+    # R_gc = 100, R_cd = 1: chondrules and dust each carry rho_g/100
+    np.testing.assert_allclose(np.sum(s.n0 * s.grid.centers), 2 * p["rho_g"] / 100.0, rtol=1e-12)
+    assert ref["a_m_final"] == 0.1  # T-Tab4.5, alpha = 1e-4, rho_X = 1
+    assert scenes.setup("ch4_nebula", alpha=1e-7, rho_X=10.0).reference["a_m_final"] == 8.5
+
+
+def test_ch2_compact_and_ch5_kernels():
+    s1 = scenes.setup("ch2_compact_1au")
+    assert s1.reference["model"] == "R1Ta4-C" and s1.reference["m"] == 1.9e-4
+    np.testing.assert_allclose(s1.params["rho_d"], s1.params["rho_g"] / 240.0, rtol=1e-12)
+    np.testing.assert_allclose(float(s1.material.e_roll()) / 2, 2.3842e-9 / 2, rtol=1e-3)  # ch2 quartz E_roll
+    s5 = scenes.setup("ch2_compact_5au", alpha=1e-4)
+    assert s5.reference["model"] == "R5Ta4-C"
+    np.testing.assert_allclose(s5.params["rho_d"], s5.params["rho_g"] / 57.0, rtol=1e-12)
+    np.testing.assert_allclose(float(s5.material.e_roll()), 3.5287e-8, rtol=1e-3)
+    for kind, k11 in (("constant", 1.0), ("sum", 1.0), ("product", 1.0)):
+        s = scenes.setup(f"ch5_{kind}")
+        np.testing.assert_allclose(float(s.kernel(jnp.asarray(1.0), jnp.asarray(1.0))), k11)
+        np.testing.assert_allclose(s.grid.centers[0], 1.0, rtol=1e-12)
+        np.testing.assert_allclose(np.sum(s.n0), 1.0, rtol=1e-12)
+    assert scenes.setup("ch5_constant", m_frag=1e10).fragmentation is not None
+
+
+def test_ch5_product_setup_solves_to_analytic_mass():
+    """The bundle runs: product kernel to t = 0.9 (before gelation), mass conserved."""
+    s = scenes.setup("ch5_product", bins_per_decade=4)
+    sol = s.solve()
+    np.testing.assert_allclose(float(jnp.sum(sol.mass_per_bin[-1]) + sol.gel_mass[-1]), 1.0, rtol=1e-10)
+
+
+def test_unknown_names_and_overrides_raise():
+    with pytest.raises(JaxcoagInputError, match="available"):
+        scenes.setup("ch7_cloud")
+    with pytest.raises(JaxcoagInputError, match="valid overrides"):
+        scenes.setup("ch6_cloud", density=1e5)
+    with pytest.raises(JaxcoagInputError, match="ice"):
+        scenes.setup("ch6_cloud", material="graphite")
+    with pytest.raises(JaxcoagInputError, match="R_au"):
+        scenes.setup("ch2_compact_1au", R_au=5)
