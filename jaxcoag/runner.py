@@ -156,6 +156,19 @@ def format_summary(res) -> str:
     return "\n".join(lines)
 
 
+def _as_config(cfg):
+    """A RunConfig from None (the built-in default), a TOML path, a dict or a RunConfig."""
+    if cfg is None:
+        return cfgmod.default()
+    if isinstance(cfg, (str, os.PathLike)):
+        return cfgmod.load(cfg)
+    if isinstance(cfg, dict):
+        return cfgmod.from_dict(cfg)
+    if not isinstance(cfg, cfgmod.RunConfig):
+        raise JaxcoagInputError(f"cfg must be a RunConfig, a TOML path, a dict or None (got {type(cfg).__name__}).")
+    return cfg
+
+
 def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, figure=None, max_segments=None,
         quick=False, verbose=True, save=True) -> RunResult:
     """Run a configuration: validate, integrate with checkpoints, save netCDF + panel, summarise.
@@ -179,14 +192,7 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
     from . import io
 
     t_start = time.perf_counter()
-    if cfg is None:
-        cfg = cfgmod.default()
-    elif isinstance(cfg, (str, os.PathLike)):
-        cfg = cfgmod.load(cfg)
-    elif isinstance(cfg, dict):
-        cfg = cfgmod.from_dict(cfg)
-    elif not isinstance(cfg, cfgmod.RunConfig):
-        raise JaxcoagInputError(f"cfg must be a RunConfig, a TOML path, a dict or None (got {type(cfg).__name__}).")
+    cfg = _as_config(cfg)
     if quick:
         cfg = quick_config(cfg)
     built = cfgmod.build(cfg)
@@ -316,12 +322,7 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     from . import io
     from . import sweep as swmod
 
-    if cfg is None:
-        cfg = cfgmod.default()
-    elif isinstance(cfg, (str, os.PathLike)):
-        cfg = cfgmod.load(cfg)
-    elif isinstance(cfg, dict):
-        cfg = cfgmod.from_dict(cfg)
+    cfg = _as_config(cfg)
     if quick:
         cfg = quick_config(cfg)
     if not params:
