@@ -18,7 +18,7 @@ Known limitation of the distribution method at large N (measured, nu = 2, N = 1e
 runaway are sampled as if each bin held ~Ng*/N_b particles instead of N: t_R = 0.091 +- 0.009 (Ng* = 2000:
 0.06), so t_R falls only slowly with N beyond ~1e5 (extrapolating the exact anchors with slope ~ -0.8 gives
 ~0.04-0.046 at 1e20). An engine-side zoom cap of the heaviest species (``jaxcoag.mc.grouping.zoom_cap_tail``,
-internal ``_Cfg.tail_events``) gave 0.051 +- 0.003 (64 events) / 0.0495 +- 0.002 (256), but it also made the
+``mc.run(..., tail_events=64)``, ``--tail-events 64`` here) gave 0.051 +- 0.003 (64 events) / 0.0495 +- 0.002 (256), but it also made the
 subcritical product-kernel M_L1 of Fig. 5.6 45x too large at t = 0.9, so it is off by default. With the cap
 (64), nu = 3 on the thesis grid gave 0.0760, 0.0260, 0.00918, 0.00407, 0.0031 +- 0.0012, 0.0050 +- 0.0023 at
 N = 300 ... 1e160 (4 runs): not decreasing beyond 1e20 with Ng* = 200.
@@ -58,6 +58,8 @@ def _extra(p):
     p.add_argument("--nus", type=str, default="2,3")
     p.add_argument("--max-events", type=int, default=None, help="event cap per run (default 2e6; quick 1e5)")
     p.add_argument("--seed", type=int, default=5007)
+    p.add_argument("--tail-events", type=float, default=0.0,
+                   help="EXPERIMENTAL zoom cap of the heaviest species (mc.run tail_events; default 0 = off)")
 
 
 def t_estimate(n, nu):
@@ -65,7 +67,7 @@ def t_estimate(n, nu):
     return math.log(n) ** (1.0 - nu) / (nu - 1.0)
 
 
-def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events):
+def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events, tail_events=0.0):
     """Mean, s.e. and per-run t_R for each N; returns dict.
 
     One vmapped call over (N, run): ``mc.run(..., stop=mc.Runaway(1e4))`` stops each run at the
@@ -87,7 +89,7 @@ def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events):
     def one(n, k):
         return mc.run(kern, n_particles=n, t_out=t_end, key=k, mode="const_v", grouping="distribution",
                       ns_target=ng, f_eps=f_eps, capacity=2 * ng, max_events=max_events,
-                      stop=mc.Runaway(1e4))
+                      stop=mc.Runaway(1e4), tail_events=tail_events)
 
     r = jax.vmap(one)(jnp.asarray(n_arr), keys)
     stopped = (np.asarray(r.status) & mc.STATUS.STOPPED) != 0
@@ -119,7 +121,7 @@ def main(argv=None):
     for nu in nus:
         ng = args.ng or 200
         n_grid = N_QUICK[nu] if quick else N_THESIS
-        r = runaway_times(nu, n_grid, ng, runs, f_eps, args.seed, max_events)
+        r = runaway_times(nu, n_grid, ng, runs, f_eps, args.seed, max_events, args.tail_events)
         out[nu] = r
         print(f"nu = {nu}: Ng* = {ng}, f_eps = {f_eps:g}, runs = {runs}")
         print("      N        t_R mean     s.e.  missing  mean/max events   exact DSMC (spec)   merger model"

@@ -261,6 +261,8 @@ MC_CASES = {
     "n_refresh_zero": (dict(n_refresh=0), "`n_refresh` must be >= 1"),
     "n_rezoom_zero": (dict(grouping="distribution", n_rezoom=0), "`n_rezoom` must be >= 1"),
     "d_max_zero": (dict(mode="const_ns", d_max=0), "`d_max` must be >= 1"),
+    "tail_events_negative": (dict(grouping="distribution", tail_events=-1.0), "`tail_events` must be a finite number >= 0"),
+    "tail_events_without_distribution": (dict(tail_events=8.0), "only applies to grouping='distribution'"),
 }
 
 
