@@ -18,17 +18,24 @@ Thesis Table 5.1 units: n0 = m0 = 1 and coeff = 1, 1/2, 1.
 References: Ormel (2008) thesis Table 5.1 and eq. 2.24; spec/montecarlo.md §4.2-4.6;
 Smoluchowski (1916); Golovin (1963); Trubnikov (1971); Ernst, Ziff & Hendriks (1984) (product
 kernel, post-gel Flory sol); Scott (1968) (exponential initial conditions).
+
+Also a semi-analytic (leading-order) runaway-time reference for K = (m_i m_j)^nu, nu > 1:
+:func:`runaway_time_chain` and :func:`log_explosion_cdf` (the "monomer-bath birth chain";
+Malyshkin & Goodman 2001; thesis Fig. 5.7, spec §4.7 F5.7).
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import special
+from scipy.integrate import simpson
 
 from ._validate import JaxcoagInputError
 
 __all__ = ["number_density", "mass_per_bin", "number_per_bin", "moments", "gel_fraction",
-           "log_nk", "KINDS"]
+           "log_nk", "KINDS", "log_explosion_cdf", "runaway_time_chain"]
 
 KINDS = ("constant", "sum", "product")
 _INITIALS = ("monodisperse", "exponential")
@@ -349,3 +356,298 @@ def moments(kind, t, p, *, coeff=1.0, n0=1.0, m0=1.0, initial="monodisperse"):
     if T >= 1.0:  # tau == 1 exactly: M2 diverges
         return [n0 * 0.5, n0 * m0, np.inf][p]
     return [n0 * (T - 0.5 * T * T) / tau, n0 * m0 * T / tau, n0 * m0 ** 2 * T / (tau * (1.0 - T))][p]
+
+
+# ---------------------------------------------------------------------------------------------
+# Runaway growth for K = (m_i m_j)^nu: the monomer-bath birth chain (spec §4.7, thesis Fig. 5.7)
+# ---------------------------------------------------------------------------------------------
+
+_CHAIN_M = 64                  # explicit terms k = 2 .. _CHAIN_M - 1, Euler-Maclaurin tail from k = _CHAIN_M
+_CHAIN_J = np.arange(80)       # terms of the small-s power series of the tail integrals
+_CHAIN_DY = 1e-3               # step of the saddlepoint grid y = log(2^nu + s)
+_CHAIN_LOGF_FLOOR = -800.0     # tabulate log F down to here (covers n_particles up to 1e300)
+_CHAIN_P_END = 1e-12           # integrate t until P(t_R > t) < this
+
+
+def _chain_tail_integrals(s, nu):
+    """I1 = int_M^inf dx/(x^nu+s), I2 = int_M^inf dx/(x^nu+s)^2 (M = _CHAIN_M, s > -M^nu).
+
+    |s| <= M^nu/2: power series in s/M^nu; else y = x s^(-1/nu), r = y^nu/(1+y^nu) turns them into
+    incomplete beta functions: I1 = s^(1/nu-1)/nu B(1/nu, 1-1/nu) Ic_r, I2 = s^(1/nu-2)/nu
+    B(1/nu, 2-1/nu) Ic_r (Ic = regularized upper incomplete beta, r = M^nu/(M^nu+s)).
+    """
+    M = float(_CHAIN_M)
+    s = np.asarray(s, float)
+    z = s / M ** nu
+    small = np.abs(z) <= 0.5
+    zs = np.where(small, z, 0.0)[..., None]
+    j = _CHAIN_J
+    p1 = M ** (1.0 - nu) * np.sum((-zs) ** j / (nu * (j + 1) - 1.0), axis=-1)
+    p2 = M ** (1.0 - 2.0 * nu) * np.sum((j + 1) * (-zs) ** j / (nu * (j + 2) - 1.0), axis=-1)
+    sb = np.where(small, 1.0, s)
+    r = M ** nu / (M ** nu + sb)
+    a = 1.0 / nu
+    q1 = a * sb ** (a - 1.0) * special.beta(a, 1.0 - a) * special.betaincc(a, 1.0 - a, r)
+    q2 = a * sb ** (a - 2.0) * special.beta(a, 2.0 - a) * special.betaincc(a, 2.0 - a, r)
+    return np.where(small, p1, q1), np.where(small, p2, q2)
+
+
+def _chain_cgf(s, nu):
+    """(-K, K1, K2) = (-K, dK/dtheta, d2K/dtheta2) at theta = -s (s > -2^nu), T = sum_{k>=2} E_k/k^nu.
+
+    K(theta) = -sum log(1 - theta/k^nu), K1 = sum 1/(k^nu - theta), K2 = sum 1/(k^nu - theta)^2.
+    Explicit sum for 2 <= k < M, then Euler-Maclaurin from x = M:
+    sum_{k>=M} g(k) = int_M^inf g + g(M)/2 - g1(M)/12 + g3(M)/720 (g1, g3: 1st, 3rd derivatives;
+    next term ~1e-12 g(M)); checked against 4e6-term direct sums to ~1e-14 relative (nu = 2, 3).
+    """
+    s = np.asarray(s, float)
+    kn = np.arange(2.0, _CHAIN_M) ** nu
+    se = s[..., None]
+    h = kn + se
+    L = np.sum(np.log1p(se / kn), axis=-1)
+    K1 = np.sum(1.0 / h, axis=-1)
+    K2 = np.sum(1.0 / (h * h), axis=-1)
+    x = float(_CHAIN_M)
+    hx = x ** nu + s
+    w = x ** nu / hx                       # w = x^nu/(x^nu+s), v = 1 - w; x dw/dx = nu w v
+    v = s / hx
+    I1, I2 = _chain_tail_integrals(s, nu)
+    g0 = np.log1p(s / x ** nu)
+    I0 = -x * g0 + nu * s * I1             # int_M^inf log(1 + s x^-nu) dx, by parts
+    d1 = -nu * v / x
+    d3 = nu / x ** 3 * (-nu * w * v * (nu * w + 1.0) + nu * nu * w * v * v - 2.0 * v * (nu * w + 1.0))
+    L = L + I0 + 0.5 * g0 - d1 / 12.0 + d3 / 720.0
+    out = []
+    for m, S, I in ((1, K1, I1), (2, K2, I2)):   # g = (x^nu+s)^-m: dg/dx = A g/x, d2g/dx2 = B g/x^2
+        g = hx ** (-m)
+        A = -m * nu * w
+        xA = -m * nu * nu * w * v
+        B = A * A - A + xA
+        xB = (2.0 * A - 1.0) * xA - m * nu ** 3 * w * v * (v - w)
+        out.append(S + I + 0.5 * g - (A * g / x) / 12.0 + (g / x ** 3 * (xB + A * B - 2.0 * B)) / 720.0)
+    return L, out[0], out[1]
+
+
+def _chain_logF_from_s(s, nu, u=None):
+    """Lugannani-Rice ln F(u) at the saddlepoint theta = -s (u = K1(theta) unless given).
+
+    F = Phi(w) + phi(w) (1/w - 1/uh), w = sign(theta) sqrt(2 (theta u - K)), uh = theta sqrt(K2).
+    For w < -1 it is evaluated as ln phi(w) + ln(Phi(w)/phi(w) + 1/w - 1/uh) (erfcx Mills ratio),
+    so F ~ 1e-300 and far below never underflows. Returns (u, ln F, K2).
+    """
+    L, K1, K2 = _chain_cgf(s, nu)
+    if u is None:
+        u = K1
+    th = -s
+    wh = -np.sign(s) * np.sqrt(2.0 * np.maximum(th * u + L, 0.0))
+    uh = th * np.sqrt(K2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logphi = -0.5 * wh * wh - 0.5 * _LOG2PI
+        neg = wh < -1.0
+        wn = np.where(neg, wh, -2.0)
+        mills = np.sqrt(np.pi / 2.0) * special.erfcx(-wn / np.sqrt(2.0))
+        lo = logphi + np.log(mills + 1.0 / wn - 1.0 / np.where(neg, uh, -1.0))
+        tiny = np.abs(wh) < 1e-3           # removable singularity at the mean: 1/w - 1/uh -> -k3/(6 k2^1.5)
+        k3 = 2.0 * (special.zeta(3.0 * nu) - 1.0)
+        k2 = special.zeta(2.0 * nu) - 1.0
+        corr = np.where(tiny, -k3 / (6.0 * k2 ** 1.5),
+                        1.0 / np.where(tiny, 1.0, wh) - 1.0 / np.where(tiny, 1.0, uh))
+        hi = np.log(np.clip(special.ndtr(wh) + np.exp(logphi) * corr, 1e-300, 1.0))
+    return u, np.minimum(np.where(neg, lo, hi), 0.0), K2
+
+
+def _chain_solve(u, nu):
+    """Saddlepoint s(u) (theta = -s) of K1(theta) = u; safeguarded Newton in y = ln(2^nu + s)."""
+    lu = np.log(u)
+    a = 1.0 / nu
+    logC = np.log(a * np.pi / np.sin(np.pi * a))     # K1(-s) <= C s^(1/nu-1) for s >= 0
+    lo = -lu                                         # K1 >= 1/(2^nu - theta) = e^-y
+    hi = np.logaddexp(nu * np.log(2.0), (logC - lu) / (1.0 - a))
+    y = 0.5 * (lo + hi)
+    two = 2.0 ** nu
+    for _ in range(300):
+        _, K1, K2 = _chain_cgf(np.exp(y) - two, nu)
+        f = np.log(K1) - lu                          # decreasing in y
+        lo = np.where(f > 0, y, lo)
+        hi = np.where(f > 0, hi, y)
+        yn = y + f * K1 / (K2 * np.exp(y))
+        yn = np.where((yn > lo) & (yn < hi), yn, 0.5 * (lo + hi))
+        done = np.all(np.abs(yn - y) <= 1e-14 * np.maximum(1.0, np.abs(y)))
+        y = yn
+        if done:
+            break
+    return np.exp(y) - two
+
+
+def _check_nu(nu):
+    try:
+        nu = float(nu)
+    except (TypeError, ValueError):
+        raise JaxcoagInputError(f"nu must be a real number > 1 (got {nu!r}).") from None
+    if not (np.isfinite(nu) and nu > 1.0):
+        raise JaxcoagInputError(f"nu must be finite and > 1 (the chain explodes only for nu > 1; got {nu!r}).")
+    return nu
+
+
+def log_explosion_cdf(u, nu):
+    """ln F(u) = ln P(T <= u) for the explosion time T = sum_{k>=2} E_k/k^nu (E_k iid Exp(1)).
+
+    T is the time (in the monomer clock tau, see :func:`runaway_time_chain`) that a pure-birth
+    chain 2 -> 3 -> 4 ... with rates k^nu needs to reach infinite mass. Lugannani-Rice saddlepoint
+    approximation from the cumulant generating function K(theta) = -sum_{k>=2} ln(1 - theta/k^nu)
+    (theta < 2^nu; the lower tail has theta -> -inf), summed to ~1e-14 (64 explicit terms plus an
+    Euler-Maclaurin tail with closed-form incomplete-beta integrals). Evaluated in log space:
+    finite far below F ~ 1e-300. Accuracy vs 4e6 brute-force samples of T: F within 1-2.5 %
+    (nu = 2, 3) from F = 0.3 down to 1e-4 (the relative error shrinks deeper in the tail, as the
+    standardized cumulants of the tilted law go to 0).
+
+    Arguments:
+        u: time(s) >= 0 in the tau clock [dimensionless, units of 1/(K(m0, m0) n0)]; any shape.
+        nu: kernel exponent, > 1.
+    Returns: ln F(u), same shape as u (-inf at u = 0 and where the saddlepoint would exceed
+    s = -theta = 1e300, i.e. ln F below ~ -1e300^(1/nu)).
+    References: Lugannani & Rice (1980), Adv. Appl. Prob. 12, 475; Daniels (1954);
+    Malyshkin & Goodman (2001).
+    """
+    nu = _check_nu(nu)
+    u = np.asarray(u, dtype=float)
+    if not np.all(u >= 0):         # also rejects NaN
+        raise JaxcoagInputError("u must be >= 0 (a time in the tau clock) and not NaN.")
+    out = np.zeros(u.shape)
+    out[u == 0] = -np.inf
+    inner = (u > 0) & np.isfinite(u)
+    if np.any(inner):
+        ui = u[inner]
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            s = _chain_solve(ui, nu)
+            lf = _chain_logF_from_s(s, nu, ui)[1]
+        out[inner] = np.where(np.isfinite(s) & (s < 1e300), lf, -np.inf)
+    return out[()] if out.ndim == 0 else out
+
+
+@functools.lru_cache(maxsize=16)
+def _chain_table(nu):
+    """Saddlepoint table on a uniform grid of y = ln(2^nu + s): (u ascending, ln F, du/dy)."""
+    two = 2.0 ** nu
+    y = -np.log(float(special.zeta(nu) - 1.0) + 40.0) - 1.0    # u(y) > E[T] + 40: F == 1 in doubles
+    us, lfs, jac = [], [], []
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        while True:
+            yc = y + _CHAIN_DY * np.arange(4096)
+            u, lf, K2 = _chain_logF_from_s(np.exp(yc) - two, nu)
+            us.append(u); lfs.append(lf); jac.append(K2 * np.exp(yc))   # du/dy = -K2 dtheta/dy
+            y = yc[-1] + _CHAIN_DY
+            if lf[-1] < _CHAIN_LOGF_FLOOR or y > 690.0:
+                break
+    u, lf, jac = (np.concatenate(a)[::-1] for a in (us, lfs, jac))
+    ok = np.isfinite(u) & np.isfinite(lf) & (jac > 0)
+    return u[ok], lf[ok], jac[ok]
+
+
+def _log_expm1_over(d):
+    """ln((e^d - 1)/d), stable for all real d (limit d/2 at 0)."""
+    sm = np.abs(d) < 1e-8
+    dd = np.where(sm, 1.0, d)
+    big = np.maximum(dd, 0.0) + np.log(-np.expm1(-np.abs(dd))) - np.log(np.abs(dd))
+    return np.where(sm, 0.5 * d, big)
+
+
+def runaway_time_chain(n_particles, nu, *, depletion=True):
+    """Leading-order runaway time t_R for K(m_i, m_j) = (m_i m_j)^nu, nu > 1, from N monomers.
+
+    Semi-analytic reference for t_R(N) where no exact simulation is possible (N up to 1e300).
+    Start: N monomers of mass m0 in volume V = N/n0 (n_1(0) = 1 in units of n0); time in units of
+    1 / (K(m0, m0) n0). t_R is the first time the largest particle is >= 1e4 x the second largest;
+    in this model it is the first explosion of a birth chain (the 1e4 criterion adds negligible time).
+
+    Model (leading order at t << 1):
+      * monomer bath with first-order depletion, dn_1/dt = -n_1^2: n_1(t) = 1/(1+t); internal
+        clock tau(t) = ln(1+t) (d tau = n_1 dt).
+      * dimers are created by monomer-monomer collisions at rate (N/2) n_1^2 per unit t
+        = (N/2) e^(-sigma) per unit tau (sigma: creation time in the tau clock).
+      * a particle of mass k accretes monomers at rate k^nu n_1, i.e. k^nu per unit tau: a pure
+        birth chain 2 -> 3 -> 4 ... (collisions among non-monomers neglected: O(t) corrections).
+      * explosion time of a chain started at mass 2: T = sum_{k>=2} E_k / k^nu, E_k iid Exp(1)
+        (finite for nu > 1); F(u) = P(T <= u) from :func:`log_explosion_cdf`.
+      * runaway at the first explosion:
+        P(t_R > t) = exp( -(N/2) int_0^tau(t) e^(-sigma) F(tau(t) - sigma) d sigma ).
+    ``depletion=False``: constant bath n_1 = 1, tau = t, creation rate N/2 per unit t, i.e.
+    P(t_R > t) = exp(-(N/2) int_0^t F(u) du).
+
+    mean = int_0^inf P(t_R > t) dt, median: P = 1/2, std from the density -dP/dt. All integrals
+    in log space (log-linear segments accumulated with logaddexp, Simpson on a uniform grid of
+    step 1e-3 in the saddlepoint variable y = ln(2^nu - theta)), t from 0 until P(t_R > t) < 1e-12.
+    Quadrature error ~1e-5 relative; the ~2 % error of the saddlepoint F shifts t_R by
+    <~ 1e-3 relative. Checked against a direct Monte Carlo of this model (nu = 2, N = 1e4:
+    0.2523 +- 0.0008 vs 0.2525). The model omits accretion of dimers, trimers ... by the growing
+    chain (relative growth-rate correction ~ 2^(nu+1) n_2/n_1 ~ 2^nu t), so at moderate N it
+    overestimates the exact DSMC t_R (N = 1e3..1e5: x1.7 for nu = 2, x1.3 for nu = 3); it becomes
+    exact as t_R -> 0, where t_R ~ (ln N)^(1-nu).
+
+    Arguments:
+        n_particles: N > 1, finite (float, up to 1e300). With ``depletion=True`` N must exceed
+            2 ln(1e12) ~ 55.3: the model leaves P(no runaway) = exp(-N/2), so t_R has no finite mean.
+        nu: kernel exponent, > 1.
+        depletion: monomer depletion n_1 = 1/(1+t) (default) or a constant bath n_1 = 1.
+    Returns: dict(mean=..., median=..., std=...) [units of 1/(K(m0, m0) n0)].
+    References: Malyshkin & Goodman (2001), Icarus 150, 314 (t_R ~ (ln N)^(1-nu)); Ormel (2008)
+    thesis Fig. 5.7, spec/montecarlo.md §4.7 F5.7; Lugannani & Rice (1980), Adv. Appl. Prob. 12, 475.
+    """
+    nu = _check_nu(nu)
+    try:
+        N = float(n_particles)
+    except (TypeError, ValueError):
+        raise JaxcoagInputError(f"n_particles must be a real number > 1 (got {n_particles!r}).") from None
+    if not (np.isfinite(N) and N > 1.0):
+        raise JaxcoagInputError(f"n_particles must be finite and > 1 (got {n_particles!r}).")
+    n_min = 2.0 * np.log(1.0 / _CHAIN_P_END)
+    if depletion and N <= n_min:
+        raise JaxcoagInputError(
+            f"with depletion=True the model needs n_particles > {n_min:.1f} (got {N!r}): "
+            "P(no runaway) = exp(-N/2) is then >= 1e-12 and the mean runaway time diverges; use "
+            "depletion=False (constant monomer bath) for smaller N.")
+    u, lf, jac = _chain_table(nu)
+    lhalf = np.log(0.5 * N)
+    if lf[0] + lhalf > -40.0:
+        raise JaxcoagInputError(f"nu = {nu!r} is outside the tabulated range of the saddlepoint "
+                                "(ln F does not get small enough); use 1 < nu <~ 100.")
+    c = u if depletion else 0.0
+    la = lf + c
+    seg = np.log(np.diff(u)) + la[:-1] + _log_expm1_over(la[1:] - la[:-1])
+    lG = np.concatenate([[-np.inf], np.logaddexp.accumulate(seg)]) - c    # ln G(tau)
+    lH = lhalf + lG
+    logP = -np.exp(lH)
+    lam = 0.5 * N
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        # dG/dtau = F - G (depletion; G < F) or F
+        ldG = lf + (np.log1p(-np.exp(np.minimum(lG - lf, 0.0))) if depletion else 0.0)
+        t = np.expm1(u) if depletion else u
+        lj = np.log(jac)
+        Pt = np.exp(logP + c + lj)                       # P dt/dy
+        dens = np.exp(logP + lhalf + ldG + lj)           # -dP/dy
+        mean = t[0] + simpson(Pt, dx=_CHAIN_DY)
+        mass = simpson(dens, dx=_CHAIN_DY)
+        m1 = simpson(t * dens, dx=_CHAIN_DY)
+        P_end = float(np.exp(logP[-1]))
+        tail = (not depletion) and P_end > 0.0     # beyond the grid F == 1: P = P_end e^(-lam (t - u_end))
+        if tail:
+            mean += P_end / lam
+            mass += P_end
+            m1 += P_end * (u[-1] + 1.0 / lam)
+        md = m1 / mass
+        var = simpson((t - md) ** 2 * dens, dx=_CHAIN_DY)
+        if tail:
+            var += P_end * ((u[-1] + 1.0 / lam - md) ** 2 + 1.0 / lam ** 2)
+        var /= mass
+        target = np.log(np.log(2.0))
+        if lH[-1] < target:                     # median in the analytic tail (depletion=False only)
+            median = u[-1] + np.log(P_end / 0.5) / lam
+        else:
+            i = int(np.searchsorted(lH, target))
+            f = (target - lH[i - 1]) / (lH[i] - lH[i - 1])
+            median = np.exp(np.log(t[i - 1]) + f * (np.log(t[i]) - np.log(t[i - 1])))
+    res = dict(mean=float(mean), median=float(median), std=float(np.sqrt(var)))
+    if not all(np.isfinite(v) for v in res.values()):
+        raise JaxcoagInputError(f"runaway time overflows for nu = {nu!r}, n_particles = {N!r} (nu too "
+                                "close to 1: E[T] = zeta(nu) - 1 makes t = e^tau - 1 overflow).")
+    return res

@@ -263,6 +263,10 @@ MC_CASES = {
     "d_max_zero": (dict(mode="const_ns", d_max=0), "`d_max` must be >= 1"),
     "tail_events_negative": (dict(grouping="distribution", tail_events=-1.0), "`tail_events` must be a finite number >= 0"),
     "tail_events_without_distribution": (dict(tail_events=8.0), "only applies to grouping='distribution'"),
+    "count_groups_zero": (dict(grouping="distribution", count_groups=0.0), "`count_groups` must be a finite number >= 1"),
+    "count_groups_nan": (dict(grouping="distribution", count_groups=float("nan")), "`count_groups` must be a finite"),
+    "count_groups_without_distribution": (dict(grouping="equal_mass", count_groups=10), "`count_groups` only applies"),
+    "tail_wmax_small": (dict(grouping="distribution", tail_wmax=0.5), "`tail_wmax` must be a finite number >= 1"),
 }
 
 

@@ -25,8 +25,8 @@ def _load(name):
     return load_script(FIGS / f"{name}.py", "_paper_fig_mc_")
 
 
-def _run(name, tmp_path):
-    res = _load(name).main(["--quick", "--out", str(tmp_path)])
+def _run(name, tmp_path, *extra, quick=True):
+    res = _load(name).main((["--quick"] if quick else []) + ["--out", str(tmp_path), *extra])
     png = pathlib.Path(res["png"])
     assert png.exists() and png.stat().st_size > 10_000
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -121,6 +121,24 @@ def test_fig5_7_runaway_time_decreases_with_n(tmp_path):
         for n, a in zip((300, 1000, 100000), anchors[nu]):
             row = ck[f"nu={nu}: t_R(N={n:g}) vs exact DSMC"]
             assert row["reference"] == a and abs(row["rel_diff"]) <= row["tol"]
+
+
+@pytest.mark.slow
+def test_fig5_7_runaway_time_large_n_matches_the_chain_model(tmp_path):
+    """N = 1e20, 1e80, 1e160 (2 runs): t_R within 5 % + 3 s.e. of the asymptotically exact monomer-bath
+    chain (jaxcoag.analytic.runaway_time_chain) at N >= 1e80, below it at 1e20, decreasing, and the last
+    local slope d ln t_R / d ln ln N within 15 % of 1 - nu."""
+    ck, res = _run("fig5_7_runaway_time", tmp_path, "--grid", "large", "--runs", "2", quick=False)
+    for nu in (2, 3):
+        mean, chain = res["runaway"][nu]["mean"], res["runaway"][nu]["chain"]
+        assert res["runaway"][nu]["N"] == [1e20, 1e80, 1e160]
+        assert all(b < a for a, b in zip(mean, mean[1:])), mean
+        assert mean[0] < chain[0]
+        for n in ("1e+80", "1e+160"):
+            row = ck[f"nu={nu}: t_R(N={n}) vs monomer-bath chain"]
+            assert abs(row["rel_diff"]) <= row["tol"], row
+        x = _c(ck, f"nu={nu}: last slope (N>=1e80) in (1-nu) x [0.85, 1.15]")
+        assert 1.15 * (1 - nu) <= x <= 0.85 * (1 - nu)
 
 
 @pytest.mark.slow

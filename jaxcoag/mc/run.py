@@ -61,11 +61,11 @@ class _Cfg:
     dedupe: bool
     n_rezoom: int
     leftover: str = "demagnify"
-    # > 0: distribution-method zoom cap of the heaviest species (grouping.zoom_cap_tail) with this many
-    # expected group events per elapsed time. Off by default: with 64 it brought t_R of (m_i m_j)^2 at
-    # N = 1e20 from 0.091 to 0.051 (Fig 5.7), but made the subcritical product-kernel M_L1 at t = 0.9
-    # (N = 1e20, Fig 5.6) 45x the random-graph value, so it is not validated yet.
+    # > 0: time-resolution cap of the distribution zoom (grouping.zoom_cap_tail): every species is
+    # expected to see >= tail_events group events per elapsed time t (runaway kernels, Fig 5.7)
     tail_events: float = 0.0
+    # > 0: ln G_c of the tail-count refinement of the distribution zoom (grouping.count_nodes)
+    count_zoom: float = 0.0
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -81,6 +81,10 @@ def _zhat(cfg, logm, st_log_mstar, xp, fp):
         return jnp.zeros(logm.shape, jnp.int32)
     if cfg.grouping == "equal_mass":
         return G.zoom_target_equal_mass(logm, st_log_mstar)
+    if cfg.count_zoom > 0:
+        nb = cfg.n_bins
+        zt = jnp.minimum(jnp.interp(logm, xp[:nb], fp[:nb]), jnp.interp(logm, xp[nb:], fp[nb:]))
+        return jnp.maximum(jnp.floor(zt), 0.0).astype(jnp.int32)
     return G.zoom_target_distribution(logm, xp, fp)
 
 
@@ -349,14 +353,15 @@ def _rezoom_all(cfg, p, st):
         w = jnp.where(st.valid, w, 0.0)
         return st._replace(w=w, z=jnp.where(st.valid, z, 0), log_mstar=lms, zref=lms)
     xp, fp = G.distribution_nodes(st.logm, st.w, st.z, st.valid, p["log_mlo"], jnp.log(p["ns_target"]), cfg.n_bins)
-    zh = G.zoom_target_distribution(st.logm, xp, fp)
+    if cfg.count_zoom > 0:
+        xc, fc = G.count_nodes(st.logm, st.w, st.z, st.valid, cfg.count_zoom)
+        xp, fp = jnp.concatenate([xp, xc]), jnp.concatenate([fp, fc])
+    zh = _zhat(cfg, st.logm, st.log_mstar, xp, fp)
     if cfg.tail_events > 0:
         lr = log_particle_rates(p["kernel"], st.logm, st.psi, st.w, st.z, st.valid) - st.logV
-        cap = G.zoom_cap_tail(st.w, st.z, st.valid, lr, st.t, jnp.log(p["ns_target"]), cfg.tail_events)
-        # only the high-mass front (the p_protect heaviest species) needs it; capping every species
-        # multiplied the events of the product-kernel test (N = 1e20, t = 0.7) by ~50
-        rank = jnp.argsort(jnp.argsort(jnp.where(st.valid, -st.logm, jnp.inf)))
-        zh = jnp.where(rank < cfg.p_protect, jnp.minimum(zh, cap), zh)
+        lwm = jnp.log(p["tail_wmax"])
+        cap = G.zoom_cap_tail(st.w, st.z, st.valid, lr, st.t, lwm, cfg.tail_events)
+        zh = jnp.minimum(zh, cap)
     w, z = G.apply_zoom(st.w, st.z, zh)
     w = jnp.where(st.valid, w, 0.0)
     lmax = jnp.max(jnp.where(st.valid, st.logm, -jnp.inf))
@@ -438,14 +443,18 @@ def _species_state(cfg: _Cfg, p: dict, init, key):
     return _blank_state(cfg, m, logm, psi, w, z, valid, logV, M_tot, log_mstar, key)
 
 
+def _n_nodes(cfg):
+    return cfg.n_bins + (cfg.capacity if cfg.count_zoom > 0 else 0)
+
+
 def _blank_state(cfg, m, logm, psi, w, z, valid, logV, M_tot, log_mstar, key):
     f = jnp.float64
     S = cfg.capacity
     return MCState(m=m, logm=logm, psi=psi, w=w, z=z, valid=valid, R=jnp.zeros((S,), f), s=jnp.array(0.0),
                    logV=logV, M_tot=M_tot, t=jnp.array(0.0), n_events=jnp.array(0, jnp.int64),
                    n_since_refresh=jnp.array(0, jnp.int64), dirty=jnp.array(True), rezoom=jnp.array(True),
-                   log_mstar=log_mstar, zref=log_mstar, zoom_xp=jnp.arange(cfg.n_bins, dtype=f),
-                   zoom_fp=jnp.zeros((cfg.n_bins,), f), key=key, k_out=jnp.array(0, jnp.int32),
+                   log_mstar=log_mstar, zref=log_mstar, zoom_xp=jnp.arange(_n_nodes(cfg), dtype=f),
+                   zoom_fp=jnp.zeros((_n_nodes(cfg),), f), key=key, k_out=jnp.array(0, jnp.int32),
                    status=jnp.array(0, jnp.int32), done=jnp.array(False), n_dup=jnp.array(0, jnp.int64),
                    n_merge=jnp.array(0, jnp.int64), snaps=None)
 
@@ -535,7 +544,8 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
         ns_target=1000, f_eps=1e-3, capacity=None, outcome=None, struct0=None, max_events=10**8,
         rates="incremental", n_refresh=None, neps_rounding="ceil", controller=None, n_bins=20,
         p_protect=16, merge_weighting="mass", dedupe=True, d_max=64, d_up=2, n_rezoom=None,
-        m_lo=None, leftover="demagnify", initial=None, resume_from=None, stop=None, tail_events=0.0):
+        m_lo=None, leftover="demagnify", initial=None, resume_from=None, stop=None, tail_events=0.0,
+        count_groups=None, tail_wmax=None):
     """Grouped Monte Carlo coagulation (Ormel & Spaans 2008) of a monodisperse or custom start.
 
     Arguments:
@@ -598,11 +608,23 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
             groups keeps one whole group with probability w, else is deleted: unbiased in
             expectation, stops the demagnify cascade of spec §6 item 3; in const_v the
             simulated mass then fluctuates, in const_n/const_ns V is rescaled to keep rho_d).
-        tail_events: EXPERIMENTAL (distribution method; default 0 = off). When > 0, cap the zoom
-            of the heaviest species (``grouping.zoom_cap_tail``) so each is expected to see at
-            least this many events per elapsed time, resolving the rare upward fluctuations that
-            seed runaway growth (t_R at N = 1e20, nu = 2: 0.091 off, 0.051 at 64). Not validated:
-            it also over-predicts the subcritical M_L1 of the product kernel (Fig 5.6 check).
+        count_groups: distribution method, runaway kernels (default None = off): G_c > 0 of the
+            tail-count refinement (``grouping.count_nodes``). The zoom becomes min(thesis z(m),
+            log2(C(m)/G_c)) with C(m) the number of particles at least as heavy as m, i.e. bins
+            equally spaced in ln C: where the count falls steeply with mass (the seed tail of a
+            runaway kernel) every species keeps >~ G_c groups and the rarest are single particles.
+            It only refines (lowers) the thesis zoom. [own; spec §2.5 "known weakness"]
+        tail_events: distribution method (default 0 = off): time-resolution cap of the zoom
+            (``grouping.zoom_cap_tail``): every species gets at least ``tail_events`` expected
+            group events per elapsed time t, w_i >= tail_events / (r_i t) (r_i = collisions per
+            particle per time), at most ``tail_wmax`` groups. This is the thesis' "demagnify the
+            monomers so that t_11 << t_R" (§5.3.3) made automatic and applied to every species:
+            the rare upward jumps that seed a runaway are sampled with quanta no larger than the
+            expected outflow. Costs ~tail_events x Ns events per e-fold of t. Use with
+            ``count_groups`` for K = (m_i m_j)^nu, nu > 1 (Fig 5.7); not for non-runaway kernels
+            (it over-resolves the bulk and inflates the event count).
+        tail_wmax: the largest number of groups per species the time cap may create (default
+            ``ns_target``); runaway runs need tail_wmax >> tail_events / t_R.
 
     Returns:
         ``MCResult`` with per-snapshot species arrays, volume, ``mass_per_bin``, ``moments``,
@@ -670,6 +692,14 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
         raise JaxcoagInputError(f"`tail_events` must be a finite number >= 0 (0 = off); got {tail_events!r}")
     if float(tail_events) > 0 and grouping != "distribution":
         raise JaxcoagInputError("`tail_events` > 0 only applies to grouping='distribution'")
+    for name, val in (("count_groups", count_groups), ("tail_wmax", tail_wmax)):
+        if val is None:
+            continue
+        if isinstance(val, bool) or not isinstance(val, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(float(val)) and float(val) >= 1.0):
+            raise JaxcoagInputError(f"`{name}` must be a finite number >= 1 (groups) or None; got {val!r}")
+        if grouping != "distribution":
+            raise JaxcoagInputError(f"`{name}` only applies to grouping='distribution'")
     if key is not None and not (isinstance(key, jax.Array) and jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)):
         if not (isinstance(key, jax.Array) and key.dtype == jnp.uint32 and key.shape[-1:] == (2,)):
             raise JaxcoagInputError(f"`key` must be a jax.random key such as jax.random.key(0); got {type(key).__name__} {key!r}")
@@ -761,7 +791,8 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
                n_bins=int(n_bins), p_protect=int(p_protect), weighting=merge_weighting, dedupe=bool(dedupe),
                n_rezoom=int(n_rezoom if n_rezoom is not None else
                             (max(1, int(float(ns_target)) // 16) if not is_traced(ns_target) else 64)),
-               leftover=leftover, tail_events=float(tail_events))
+               leftover=leftover, tail_events=float(tail_events),
+               count_zoom=(math.log(float(count_groups)) if count_groups is not None else 0.0))
     if rates == "full":
         cfg = dataclasses.replace(cfg, n_refresh=1)
     if m_lo is not None:
@@ -771,7 +802,8 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
     else:
         log_mlo = jnp.log(m0)
     p = dict(kernel=kernel, outcome=outcome, rho_d=rho_d, log2_feps=jnp.log2(f_eps), ns_target=ns_target,
-             t_out=t_arr, max_events=jnp.asarray(max_events, jnp.int64), log_mlo=log_mlo, stop=stop)
+             t_out=t_arr, max_events=jnp.asarray(max_events, jnp.int64), log_mlo=log_mlo, stop=stop,
+             tail_wmax=(ns_target if tail_wmax is None else jnp.asarray(float(tail_wmax))))
     if resume_from is not None:
         init = ("resume", resume_from)
     elif initial is not None:
