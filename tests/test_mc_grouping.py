@@ -260,3 +260,12 @@ def test_runaway_refinements_resolve_the_seed_tail():
     bound = A.runaway_time_chain(1e20, 2.0)["mean"]
     assert t_new.max() < t_ref.min(), (t_new, t_ref)
     assert t_new.mean() < bound < t_ref.mean(), (t_new, bound, t_ref)
+
+
+def test_count_groups_one_is_on():
+    """G_c = 1 (ln G_c = 0) switches the refinement on (it once meant "off"); mass stays exact."""
+    res = mc.run(K.Constant(1.0), n_particles=1e6, t_out=jnp.array([0.5]), key=jax.random.key(2),
+                 grouping="distribution", ns_target=50, capacity=64, count_groups=1)
+    assert int(res.status) == 0
+    assert res.final_state.zoom_xp.shape == (20 + 64,)
+    np.testing.assert_allclose(float(np.sum(np.asarray(res.g) * np.asarray(res.m))), 1e6, rtol=1e-12)

@@ -64,8 +64,8 @@ class _Cfg:
     # > 0: time-resolution cap of the distribution zoom (grouping.zoom_cap_tail): every species is
     # expected to see >= tail_events group events per elapsed time t (runaway kernels, Fig 5.7)
     tail_events: float = 0.0
-    # > 0: ln G_c of the tail-count refinement of the distribution zoom (grouping.count_nodes)
-    count_zoom: float = 0.0
+    # ln G_c of the tail-count refinement of the distribution zoom (grouping.count_nodes); None = off
+    count_zoom: float | None = None
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -81,7 +81,7 @@ def _zhat(cfg, logm, st_log_mstar, xp, fp):
         return jnp.zeros(logm.shape, jnp.int32)
     if cfg.grouping == "equal_mass":
         return G.zoom_target_equal_mass(logm, st_log_mstar)
-    if cfg.count_zoom > 0:
+    if cfg.count_zoom is not None:
         nb = cfg.n_bins
         zt = jnp.minimum(jnp.interp(logm, xp[:nb], fp[:nb]), jnp.interp(logm, xp[nb:], fp[nb:]))
         return jnp.maximum(jnp.floor(zt), 0.0).astype(jnp.int32)
@@ -353,7 +353,7 @@ def _rezoom_all(cfg, p, st):
         w = jnp.where(st.valid, w, 0.0)
         return st._replace(w=w, z=jnp.where(st.valid, z, 0), log_mstar=lms, zref=lms)
     xp, fp = G.distribution_nodes(st.logm, st.w, st.z, st.valid, p["log_mlo"], jnp.log(p["ns_target"]), cfg.n_bins)
-    if cfg.count_zoom > 0:
+    if cfg.count_zoom is not None:
         xc, fc = G.count_nodes(st.logm, st.w, st.z, st.valid, cfg.count_zoom)
         xp, fp = jnp.concatenate([xp, xc]), jnp.concatenate([fp, fc])
     zh = _zhat(cfg, st.logm, st.log_mstar, xp, fp)
@@ -444,7 +444,7 @@ def _species_state(cfg: _Cfg, p: dict, init, key):
 
 
 def _n_nodes(cfg):
-    return cfg.n_bins + (cfg.capacity if cfg.count_zoom > 0 else 0)
+    return cfg.n_bins + (cfg.capacity if cfg.count_zoom is not None else 0)
 
 
 def _blank_state(cfg, m, logm, psi, w, z, valid, logV, M_tot, log_mstar, key):
@@ -792,7 +792,7 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
                n_rezoom=int(n_rezoom if n_rezoom is not None else
                             (max(1, int(float(ns_target)) // 16) if not is_traced(ns_target) else 64)),
                leftover=leftover, tail_events=float(tail_events),
-               count_zoom=(math.log(float(count_groups)) if count_groups is not None else 0.0))
+               count_zoom=(math.log(float(count_groups)) if count_groups is not None else None))
     if rates == "full":
         cfg = dataclasses.replace(cfg, n_refresh=1)
     if m_lo is not None:
