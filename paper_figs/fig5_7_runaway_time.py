@@ -140,7 +140,7 @@ def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events, tail_events=0.0
 
 
 N_LARGE = (1e20, 1e80, 1e160)
-TAIL_EVENTS = {2: 64.0, 3: 64.0}  # per nu (one value suffices)
+TAIL_EVENTS = 64.0  # one value serves nu = 2 and 3
 
 
 def main(argv=None):
@@ -164,7 +164,7 @@ def main(argv=None):
         ng = args.ng or 2000
         n_grid = {"quick": N_QUICK[nu], "thesis": N_THESIS, "large": N_LARGE}[grid]
         gc = 10.0 if args.count_groups is None else args.count_groups
-        te = TAIL_EVENTS[nu] if args.tail_events is None else args.tail_events
+        te = TAIL_EVENTS if args.tail_events is None else args.tail_events
         r = runaway_times(nu, n_grid, ng, runs, f_eps, args.seed, max_events, te, gc or None, args.wmax,
                           args.capacity)
         chain = [analytic.runaway_time_chain(float(n), float(nu)) for n in r["N"]]

@@ -127,7 +127,7 @@ def zoom_cap_tail(w, z, valid, log_rate, t, log_wmax, n_events=1.0):
     expected outflow, so the front advances with the true tail counts and the heaviest
     particles become single (z = 0) where g r t < 1. It costs ≈ n_events group events per
     capped species per elapsed time t. The lower bound z ≥ log2(g_i / W_max) (W_max =
-    Ng*) keeps a bulk species at ≤ W_max groups at t → 0.
+    ``mc.run``'s tail_wmax, default Ng*) keeps a bulk species at ≤ W_max groups at t → 0.
 
     At t = 0 the cap is the floor itself (as many groups as W_max allows).
 
