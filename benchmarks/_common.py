@@ -15,7 +15,7 @@ Conventions (cgs throughout):
 
 References: Smoluchowski (1916) and Scott (1968) (constant kernel, exponential initial
 condition); Golovin (1963) and Scott (1968) (sum kernel, exponential initial condition);
-spec/montecarlo.md §4.2-4.3 and §5.1.
+error metrics: docs/design_notes.md (Monte Carlo conventions).
 """
 
 from __future__ import annotations
@@ -116,7 +116,7 @@ def mass_per_bin_constant_exp(edges, t, *, coeff, n0, m0):
 
     Parameters: edges [g] (nbins+1,), t [s], coeff [cm^3 s^-1], n0 [cm^-3], m0 [g] (mean mass
     at t = 0). Returns mass per bin [g cm^-3], shape (nbins,).
-    References: Scott (1968); spec/montecarlo.md §4.2.
+    References: Smoluchowski (1916); Scott (1968).
     """
     edges = _check_edges(edges)
     s = 1.0 + 0.5 * coeff * n0 * t
@@ -131,7 +131,7 @@ def mass_density_sum_exp(m, t, *, coeff, n0, m0):
     With eps = exp(-coeff n0 m0 t), T = 1 - eps and x = m/m0:
     m f = n0 eps / sqrt(T) exp(-(1 - sqrt T)^2 x) ive(1, 2 sqrt(T) x)   (T > 0),
     m f = n0 x exp(-x)                                                  (T = 0).
-    References: Golovin (1963); Scott (1968); spec/montecarlo.md §4.3.
+    References: Golovin (1963); Scott (1968).
     """
     m = np.asarray(m, dtype=np.float64)
     x = m / m0

@@ -30,7 +30,7 @@ Run: ``python benchmarks/binned_accuracy_vs_time.py [--quick]`` (restrict with `
 ``--schemes``, ``--bpd``, ``--rtol``, ``--no-peers``). Writes
 ``benchmarks/results/binned_accuracy_vs_time[_quick].json`` and a PNG.
 References: Smoluchowski (1916); Golovin (1963); Scott (1968); Stammler & Birnstiel (2022);
-Lombart & Laibe (2021) (DG); DESIGN.md §3, §5.
+Lombart & Laibe (2021) (DG); docs/design_notes.md.
 """
 
 from __future__ import annotations

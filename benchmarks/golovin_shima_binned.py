@@ -6,7 +6,7 @@ Metric: relative L1 of mass per bin at 3600 s against the exact Golovin solution
 own bins (DustPy: its notebook bin edges; ours: log edges at the same bins/decade).
 
 Reports, as ratios, the error at equal bins/decade and the wall time at equal error. DustPy is
-run at its notebook defaults and with the pitfalls of DESIGN.md §5 fixed (1/2 on the diagonal,
+run at its notebook defaults and with the pitfalls listed in docs/design_notes.md fixed (1/2 on the diagonal,
 fresh first step), at cfl 0.1 and 0.001. Writes benchmarks/results/golovin_shima_binned[_quick].json
 and a PNG.
 

@@ -24,7 +24,7 @@ Prints a table; writes JSON (+ PNG) to benchmarks/results/gradient_cost[_quick].
     python benchmarks/gradient_cost.py [--quick] [--reps N] [--bpd 3 5 8]
 
 References: Kidger (2021) diffrax adjoints (RecursiveCheckpointAdjoint, ForwardMode);
-Griewank & Walther (2008) (reverse-mode cost bound ~ 3-5 x forward); DESIGN.md §5.
+Griewank & Walther (2008) (reverse-mode cost bound ~ 3-5 x forward); docs/design_notes.md.
 """
 
 from __future__ import annotations

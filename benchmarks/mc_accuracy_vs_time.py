@@ -15,7 +15,7 @@ monodisperse problem (``benchmarks/peers/pysdm_golovin.py``); PySDM on its own e
 Shima box is run too and reported as a reference of its home accuracy.
 
 A second, less noise-dominated metric ``l1_coarse`` merges every 5 radius bins (~factor-2
-mass bins, spec/montecarlo.md §5.1) before taking the L1. Ratios: from our (wall, L1) points (mean over seeds per configuration, log-log
+mass bins, as in Ormel 2008 thesis §5.3) before taking the L1. Ratios: from our (wall, L1) points (mean over seeds per configuration, log-log
 interpolation along our Pareto front): at each PySDM run's wall time, L1(PySDM) / L1(ours)
 (> 1: we are more accurate for the same time), and at each PySDM run's error,
 wall(PySDM) / wall(ours) (> 1: we are faster). Outside our measured range the value is null
@@ -25,7 +25,7 @@ Run: ``python benchmarks/mc_accuracy_vs_time.py [--quick] [--ns 64,128] [--feps 
 [--nsd 11,13] [--seeds 2] [--no-peers]``. Writes benchmarks/results/mc_accuracy_vs_time[_quick].json
 and a PNG.
 References: Ormel & Spaans (2008) ApJ 684, 1291; Shima et al. (2009) QJRMS 135, 1307;
-Golovin (1963); spec/montecarlo.md §5.
+Golovin (1963); metrics in docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ COARSE = 5   # radius bins merged for the coarse metric (factor 2.07 in mass per
 
 
 def coarse_l1(spec, ref):
-    """Relative L1 after merging every COARSE radius bins (~factor-2 mass bins, spec §5.1)."""
+    """Relative L1 after merging every COARSE radius bins (~factor-2 mass bins)."""
     idx = np.arange(spec.size) // COARSE
     return C.rel_l1(np.bincount(idx, weights=spec), np.bincount(idx, weights=ref))
 
@@ -62,7 +62,7 @@ def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=8):
     """Run our grouped MC for ``seeds`` (list of ints); returns one dict per seed.
 
     ``capacity`` = ``capacity_factor`` x Ns (the library default 8 x Ns for equal-mass; since
-    equal-mass runs merge mass neighbours above 0.9 S (spec §2.7/§7) it no longer overflows
+    equal-mass runs merge mass neighbours above 0.9 S (thesis §5.2.1 merging) it no longer overflows
     here; the earlier 16 x Ns doubled the O(S) per-event work).
     The first seed's time includes compilation (unless this Ns was compiled before: f_eps is
     a traced argument); its ``wall_s`` is None and ``compile_s`` = first time - its events x

@@ -20,7 +20,7 @@ the vmapped result is compared with the loop member by member. Prints a table, w
 
     python benchmarks/sweep_throughput.py [--quick] [--sizes 8 32] [--no-sharded]
 
-References: JAX vmap / lax.map / shard_map; jaxcoag.sweep module docstring; DESIGN.md §2.
+References: JAX vmap / lax.map / shard_map; jaxcoag.sweep module docstring.
 """
 
 from __future__ import annotations

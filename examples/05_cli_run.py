@@ -9,6 +9,11 @@ varying alpha to measure how the fragmentation-limited peak mass scales with tur
 if turbulence dominates the relative velocities).
 
     python examples/05_cli_run.py [--quick] [--out DIR]
+
+Every file it writes (netCDF, figures, checkpoint) goes inside the output directory: by default
+examples/out/05_cli_run/ next to this script (git-ignored), or a fresh temporary directory with
+--quick; nothing is written to the current directory.
+
     # the same from a shell:
     jaxcoag run examples/scenes/ch4_disk_3au.toml --out jaxcoag_out/ch4_3au.nc
     jaxcoag plot jaxcoag_out/ch4_3au.nc
@@ -27,16 +32,18 @@ import numpy as np
 
 from jaxcoag import cli, config, io, runner
 
-SCENE = pathlib.Path(__file__).resolve().parent / "scenes" / "ch4_disk_3au.toml"
+HERE = pathlib.Path(__file__).resolve().parent
+SCENE = HERE / "scenes" / "ch4_disk_3au.toml"
+DEFAULT_OUT = HERE / "out" / "05_cli_run"
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="coarse grid and few outputs (seconds)")
-    ap.add_argument("--out", default=None, help="output directory (default: jaxcoag_out/example05; a temporary "
+    ap.add_argument("--out", default=None, help=f"output directory (default: {DEFAULT_OUT}; a temporary "
                     "directory with --quick)")
     args = ap.parse_args(argv)
-    out = args.out or (tempfile.mkdtemp(prefix="jaxcoag_ex05_") if args.quick else "jaxcoag_out/example05")
+    out = args.out or (tempfile.mkdtemp(prefix="jaxcoag_ex05_") if args.quick else str(DEFAULT_OUT))
     os.makedirs(out, exist_ok=True)
     q = ["--quick"] if args.quick else []
 

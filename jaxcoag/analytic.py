@@ -15,13 +15,13 @@ Dimensionless times: constant tau = coeff n0 t; sum eps = exp(-coeff n0 m0 t);
 product tau = coeff n0 m0^2 t (gel point tau = 1 monodisperse, 1/2 exponential).
 Thesis Table 5.1 units: n0 = m0 = 1 and coeff = 1, 1/2, 1.
 
-References: Ormel (2008) thesis Table 5.1 and eq. 2.24; spec/montecarlo.md §4.2-4.6;
+References: Ormel (2008) thesis Table 5.1 and eq. 2.24;
 Smoluchowski (1916); Golovin (1963); Trubnikov (1971); Ernst, Ziff & Hendriks (1984) (product
 kernel, post-gel Flory sol); Scott (1968) (exponential initial conditions).
 
 Also a semi-analytic (leading-order) runaway-time reference for K = (m_i m_j)^nu, nu > 1:
 :func:`runaway_time_chain` and :func:`log_explosion_cdf` (the "monomer-bath birth chain";
-Malyshkin & Goodman 2001; thesis Fig. 5.7, spec §4.7 F5.7).
+Malyshkin & Goodman 2001; thesis Fig. 5.7 and §5.3.3).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ __all__ = ["number_density", "mass_per_bin", "number_per_bin", "moments", "gel_f
 
 KINDS = ("constant", "sum", "product")
 _INITIALS = ("monodisperse", "exponential")
-_K_EXACT = 2 ** 16          # exact summation of discrete n_k below this k (spec §4.6)
+_K_EXACT = 2 ** 16          # exact summation of discrete n_k below this k (Euler-Maclaurin above)
 _LOG2PI = np.log(2.0 * np.pi)
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
 
@@ -73,7 +73,7 @@ def _stirling_corr(k):
 
 
 def _product_I(tau):
-    """I(tau) = tau - 1 - log(tau) >= 0, series near tau = 1 (spec §4.4)."""
+    """I(tau) = tau - 1 - log(tau) >= 0, series near tau = 1 (large-k asymptotics of the product-kernel n_k)."""
     d = tau - 1.0
     if abs(d) < 1e-3:
         return d * d / 2.0 - d ** 3 / 3.0 + d ** 4 / 4.0 - d ** 5 / 5.0
@@ -90,8 +90,9 @@ def log_nk(kind, k, t, *, coeff=1.0, n0=1.0, m0=1.0):
 
     Returns: array of ln n_k (-inf where n_k = 0, e.g. k > 1 at t = 0).
 
-    References: spec/montecarlo.md §4.2 (constant), §4.3 (sum, Stirling for k > 100), §4.4
-    (product; the same formula is the post-gel Flory sol).
+    References: Smoluchowski (1916) (constant), Golovin (1963) (sum, Stirling for k > 100),
+    Trubnikov (1971) (product; the same formula is the post-gel Flory sol, Ernst, Ziff & Hendriks
+    1984); thesis Table 5.1.
     """
     t, coeff, n0, m0 = _args(kind, t, coeff, n0, m0, "monodisperse")
     k = np.asarray(k, dtype=float)
@@ -204,8 +205,8 @@ def number_density(kind, m, t, *, coeff=1.0, n0=1.0, m0=1.0, initial="monodisper
         monodisperse: n_k [cm^-3] of k-mers (post-gel product kernel: the Flory sol);
         exponential: f(m, t) [cm^-3 g^-1].
 
-    References: spec/montecarlo.md §4.2-4.4 (eqs. for n_k, Golovin/Bessel form of §4.3);
-    Scott (1968); Ernst, Ziff & Hendriks (1984).
+    References: Smoluchowski (1916); Golovin (1963) (Bessel form for exponential initial
+    conditions); Trubnikov (1971); Scott (1968); Ernst, Ziff & Hendriks (1984).
     """
     t, coeff, n0, m0 = _args(kind, t, coeff, n0, m0, initial)
     m = np.asarray(m, float)
@@ -268,13 +269,13 @@ def mass_per_bin(kind, edges, t, *, coeff=1.0, n0=1.0, m0=1.0, initial="monodisp
     """Exact mass density per bin [g cm^-3] for arbitrary bin edges [g].
 
     Monodisperse: sum of n_k k m0 over integers with lo <= k m0 < hi (exact up to k = 2^16,
-    Euler-Maclaurin on the Stirling form beyond, spec §4.6). Exponential: the integral of
+    Euler-Maclaurin on the Stirling form beyond). Exponential: the integral of
     m f(m, t) over the bin (64-pt Gauss-Legendre in ln m per bin). Post-gel product kernel:
     the sol only (the gel carries 1 - T/tau of the mass, see :func:`gel_fraction`).
 
     Arguments: kind, edges (nbins+1,) [g], t [s], coeff, n0 [cm^-3], m0 [g], initial.
     Returns: (nbins,) array [g cm^-3].
-    References: spec/montecarlo.md §4.6.
+    References: Smoluchowski (1916); Golovin (1963); Trubnikov (1971); Scott (1968).
     """
     t, coeff, n0, m0 = _args(kind, t, coeff, n0, m0, initial)
     e = _check_edges(edges)
@@ -307,7 +308,7 @@ def gel_fraction(t, *, coeff=1.0, n0=1.0, m0=1.0):
 
     beta = 1 - T/tau with T = -W0(-tau e^{-tau}) (0 for tau <= 1), tau = coeff n0 m0^2 t.
     Arguments: t [s], coeff [cm^3 s^-1 g^-2], n0 [cm^-3], m0 [g]. Returns: beta in [0, 1).
-    References: spec/montecarlo.md §4.4 (Flory; Ernst, Ziff & Hendriks 1984).
+    References: Flory (1941); Ernst, Ziff & Hendriks (1984).
     """
     t, coeff, n0, m0 = _args("product", t, coeff, n0, m0, "monodisperse")
     tau = _tau("product", t, coeff, n0, m0)
@@ -331,7 +332,7 @@ def moments(kind, t, p, *, coeff=1.0, n0=1.0, m0=1.0, initial="monodisperse"):
       n0 m0^2 T/(tau (1-T))).
       exponential: constant n0/(1+tau/2), n0 m0, n0 m0^2 (2+tau); sum n0 eps, n0 m0,
       2 n0 m0^2/eps^2; product (tau < 1/2) n0 (1 - tau/2), n0 m0, 2 n0 m0^2/(1 - 2 tau).
-    References: thesis Table 5.1; spec/montecarlo.md §4.2-4.5 (moment ODE 5.4).
+    References: thesis Table 5.1 and the moment ODE, eq. 5.4.
     """
     t, coeff, n0, m0 = _args(kind, t, coeff, n0, m0, initial)
     if p not in (0, 1, 2):
@@ -359,7 +360,7 @@ def moments(kind, t, p, *, coeff=1.0, n0=1.0, m0=1.0, initial="monodisperse"):
 
 
 # ---------------------------------------------------------------------------------------------
-# Runaway growth for K = (m_i m_j)^nu: the monomer-bath birth chain (spec §4.7, thesis Fig. 5.7)
+# Runaway growth for K = (m_i m_j)^nu: the monomer-bath birth chain (thesis Fig. 5.7, §5.3.3)
 # ---------------------------------------------------------------------------------------------
 
 _CHAIN_M = 64                  # explicit terms k = 2 .. _CHAIN_M - 1, Euler-Maclaurin tail from k = _CHAIN_M
@@ -591,7 +592,7 @@ def runaway_time_chain(n_particles, nu, *, depletion=True):
         depletion: monomer depletion n_1 = 1/(1+t) (default) or a constant bath n_1 = 1.
     Returns: dict(mean=..., median=..., std=...) [units of 1/(K(m0, m0) n0)].
     References: Malyshkin & Goodman (2001), Icarus 150, 314 (t_R ~ (ln N)^(1-nu)); Ormel (2008)
-    thesis Fig. 5.7, spec/montecarlo.md §4.7 F5.7; Lugannani & Rice (1980), Adv. Appl. Prob. 12, 475.
+    thesis Fig. 5.7 (Ormel & Spaans 2008); Lugannani & Rice (1980), Adv. Appl. Prob. 12, 475.
     """
     nu = _check_nu(nu)
     try:

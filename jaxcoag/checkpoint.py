@@ -7,7 +7,10 @@ for every segment (the segment's two times are arrays, so nothing recompiles). A
 segment the state history is written atomically to a checkpoint file (``numpy.savez`` to a
 temporary file in the same directory, fsync, ``os.replace``), together with a sha256 of the
 run configuration and the output times. :func:`integrate` with ``resume=True`` loads the last
-complete segment and continues.
+complete segment and continues. Ctrl-C (KeyboardInterrupt) during a segment writes the
+completed segments and raises :class:`RunInterrupted`; a checkpoint that is truncated, not a
+jaxcoag file, inconsistent, holds NaN/inf or belongs to another configuration is refused on
+loading with a :class:`~jaxcoag._validate.JaxcoagInputError` naming the file.
 
 Because an uninterrupted run uses exactly the same segmentation (each segment restarts the
 adaptive step control from the default ``dt0`` of :func:`jaxcoag.binned.solve_binned`), a
@@ -36,7 +39,8 @@ import diffrax
 from ._validate import JaxcoagInputError
 from .io import atomic_write
 
-__all__ = ["integrate", "SegmentedRun", "save_checkpoint", "load_checkpoint", "CHECKPOINT_FORMAT"]
+__all__ = ["integrate", "SegmentedRun", "RunInterrupted", "save_checkpoint", "load_checkpoint",
+           "CHECKPOINT_FORMAT"]
 
 CHECKPOINT_FORMAT = "jaxcoag-binned-checkpoint-v1"
 
@@ -58,6 +62,21 @@ class SegmentedRun:
         self.__dict__.update(kw)
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`integrate`: raised after the completed segments were checkpointed.
+
+    Attributes: checkpoint (the path written, or None when the run had no checkpoint),
+    segments_done (completed segments), n_segments (all segments of the run).
+    """
+
+    def __init__(self, checkpoint=None, segments_done=0, n_segments=0):
+        super().__init__(f"interrupted after {segments_done} of {n_segments} segments"
+                         + (f"; checkpoint {checkpoint}" if checkpoint else ""))
+        self.checkpoint = checkpoint
+        self.segments_done = segments_done
+        self.n_segments = n_segments
+
+
 def _atomic_savez(path, **arrays):
     def write(tmp):
         with open(tmp, "wb") as fh:
@@ -74,33 +93,67 @@ def save_checkpoint(path, *, config_hash, ts, ys, steps, rejected, wall_s, resul
                   wall_s=np.asarray(wall_s, np.float64), result_code=np.array(int(result_code)))
 
 
+_FIELDS = {"format": 0, "config_hash": 0, "ts": 1, "ys": 2, "steps": 1, "rejected": 1, "wall_s": 1,
+           "result_code": 0}  # field -> ndim
+
+
+def _one_line(e) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
 def load_checkpoint(path, *, config_hash=None, ts=None, ny=None):
-    """Read a checkpoint; refuse (JaxcoagInputError) one written for another configuration.
+    """Read a checkpoint; refuse (JaxcoagInputError naming the file and what to do) one that is
+    truncated or not a jaxcoag binned checkpoint (random bytes, another npz), inconsistent,
+    holds NaN/inf states or was written for another configuration.
 
     Arguments: path; config_hash / ts [s] / ny (state length): when given, must match.
     Returns: dict with the fields of the module docstring (numpy arrays, str hash).
     """
+    import zipfile
+    import zlib
+
     path = os.fspath(path)
+    todo = "delete it, or run without --resume to start afresh"
     if not os.path.isfile(path):
         raise JaxcoagInputError(f"no checkpoint file at {path!r}.")
     try:
         with np.load(path, allow_pickle=False) as z:
-            ck = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise JaxcoagInputError(f"{path} is not a readable jaxcoag checkpoint ({e}); delete it to start afresh.") from e
-    if "format" not in ck or str(ck["format"]) != CHECKPOINT_FORMAT:
-        raise JaxcoagInputError(f"{path} is not a {CHECKPOINT_FORMAT} file; delete it or pass another checkpoint.")
+            if not hasattr(z, "files"):  # a bare .npy array, not an npz archive
+                raise ValueError("a single array, not an npz archive")
+            ck = {k: z[k] for k in z.files if k in _FIELDS}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
+        why = "not an npz archive" if "pickle" in str(e) else _one_line(e)  # numpy: unknown magic = "pickled"
+        raise JaxcoagInputError(f"checkpoint {path} is truncated or not a jaxcoag checkpoint ({why}); "
+                                f"{todo}.") from e
+    if "format" not in ck or ck["format"].ndim != 0 or str(ck["format"]) != CHECKPOINT_FORMAT:
+        raise JaxcoagInputError(f"{path} is not a {CHECKPOINT_FORMAT} file; {todo}, or pass another --checkpoint.")
+    bad = [k for k, nd in _FIELDS.items() if k not in ck or ck[k].ndim != nd]
+    if not bad and ck["ys"].dtype.kind != "f":
+        bad = ["ys"]
+    if not bad:
+        n = ck["ys"].shape[0]
+        code = int(ck["result_code"])
+        nseg = n - 1 + (code != 0)  # a failed segment is recorded without its state
+        if n < 1 or not all(ck[k].shape[0] == nseg for k in ("steps", "rejected", "wall_s")) or \
+                ck["ts"].shape[0] < n:
+            bad = ["ys/steps/ts lengths"]
+    if bad:
+        raise JaxcoagInputError(f"checkpoint {path} is incomplete or inconsistent (fields {bad}); {todo}.")
+    if not np.all(np.isfinite(ck["ys"])) or not np.all(np.isfinite(ck["ts"])):
+        raise JaxcoagInputError(f"checkpoint {path} holds NaN/inf states or times (a corrupted file); {todo}.")
     ck["config_hash"] = str(ck["config_hash"])
     ck["result_code"] = int(ck["result_code"])
     if config_hash is not None and ck["config_hash"] != str(config_hash):
         raise JaxcoagInputError(
             f"checkpoint {path} was written by a different run configuration (hash {ck['config_hash'][:12]}... "
-            f"vs {str(config_hash)[:12]}...); refusing to resume. Run without --resume to start afresh, or "
-            "point --checkpoint at another file.")
+            f"vs {str(config_hash)[:12]}...); refusing to resume. Run without --resume to start afresh, delete it, "
+            "or point --checkpoint at another file.")
     if ts is not None and (ck["ts"].shape != np.shape(ts) or not np.array_equal(ck["ts"], np.asarray(ts))):
-        raise JaxcoagInputError(f"checkpoint {path} has other output times than this run; refusing to resume.")
+        raise JaxcoagInputError(f"checkpoint {path} has other output times than this run; refusing to resume. "
+                                f"Run without --resume to start afresh or delete it.")
     if ny is not None and ck["ys"].shape[1] != ny:
-        raise JaxcoagInputError(f"checkpoint {path} holds states of length {ck['ys'].shape[1]}, this run needs {ny}.")
+        raise JaxcoagInputError(f"checkpoint {path} holds states of length {ck['ys'].shape[1]}, this run needs {ny}; "
+                                f"{todo}.")
     return ck
 
 
@@ -124,7 +177,7 @@ def _segment_solver(scheme, grid, model, fragmentation, solver, rtol, atol, max_
 
 def integrate(model, grid, y0, ts, *, scheme, fragmentation=None, solver=None, rtol=1e-6, atol=1e-10,
               max_steps=100_000, checkpoint=None, resume=False, config_hash="", progress=False,
-              max_segments=None, desc="jaxcoag run", on_segment=None) -> SegmentedRun:
+              max_segments=None, desc="jaxcoag run", on_segment=None, save=True) -> SegmentedRun:
     """Integrate segment by segment over the output times, checkpointing after each segment.
 
     Arguments:
@@ -142,13 +195,19 @@ def integrate(model, grid, y0, ts, *, scheme, fragmentation=None, solver=None, r
         max_segments: integrate at most this many new segments, then return (finished=False);
             a later ``resume=True`` call continues (batch-queue time slices).
         on_segment: optional callback(k, t_k1, y_k1) after each completed segment.
+        save: write the checkpoint (False: ``checkpoint`` is only read for ``resume``; nothing
+            is written).
 
     Returns:
         :class:`SegmentedRun`. A segment that fails (max steps, non-finite, negative density)
         stops the run: the solution then holds the outputs up to the last good one and
         ``solution.result`` is the failure.
 
-    References: module docstring; DESIGN.md §5 (solver choices).
+    Raises:
+        :class:`RunInterrupted` (a KeyboardInterrupt) on Ctrl-C: the completed segments are
+        written to ``checkpoint`` first (atomically), so ``resume=True`` continues exactly.
+
+    References: module docstring; docs/design_notes.md (solver traps).
     """
     from .binned import BinnedSolution, RESULTS
 
@@ -198,13 +257,24 @@ def integrate(model, grid, y0, ts, *, scheme, fragmentation=None, solver=None, r
                 ys.append(np.asarray(y1))
                 y = y1
             done_now += 1
-            if checkpoint is not None:
+            if checkpoint is not None and save:
                 save_checkpoint(checkpoint, config_hash=config_hash, ts=ts, ys=np.stack(ys), steps=steps,
                                 rejected=rejected, wall_s=walls, result_code=code)
             bar.set_postfix_str(f"t = {ts[k + 1] / 3.15576e7:.3g} yr, {steps[-1]} steps", refresh=False)
             bar.update(1)
             if on_segment is not None and c == 0:
                 on_segment(k + 1, ts[k + 1], y1)
+    except KeyboardInterrupt as e:
+        # keep the completed segments only (the interrupt may fall between the bookkeeping lines)
+        n_ok = len(ys) - 1
+        nrec = n_ok + (1 if code != 0 else 0)
+        del steps[nrec:], rejected[nrec:], walls[nrec:]
+        saved = None
+        if checkpoint is not None and save:
+            save_checkpoint(checkpoint, config_hash=config_hash, ts=ts, ys=np.stack(ys), steps=steps,
+                            rejected=rejected, wall_s=walls, result_code=code)
+            saved = checkpoint
+        raise RunInterrupted(checkpoint=saved, segments_done=n_ok, n_segments=nseg) from e
     finally:
         bar.close()
 

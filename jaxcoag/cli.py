@@ -4,13 +4,19 @@
                                            TOML configuration (default: growth and fragmentation at 1 AU
                                            in the MMSN); saves netCDF + figure panel, prints a summary.
 ``jaxcoag plot FILE [--out PNG]``          re-plot a saved run.
-``jaxcoag sweep [scene.toml] --param alpha=1e-4,1e-3 ...``  parameter sweep of a configuration.
+``jaxcoag sweep [scene.toml] --param alpha=1e-4,1e-3 ...``  parameter sweep of a configuration (progress
+                                           bar over the members; netCDF + figure of the final mass peak).
+``jaxcoag --version``                      the installed version (importlib.metadata).
 ``jaxcoag config [--default]``             print the default configuration (a commented TOML template).
 ``jaxcoag demo``                           relative velocities and kernel of the ch. 4 nebula scene.
 
 ``jaxcoag`` with no subcommand runs ``jaxcoag run``. Exit codes: 0 success, 1 the solver failed (the
 outputs up to the failure are saved) or the run stopped early (``--max-segments``), 2 refused input
-(nothing is written; the reason is on stderr).
+(a one-line reason on stderr, no traceback; checked before any computation, nothing is written:
+bad configuration, a grid too large for the memory, an output location that cannot be written,
+an unreadable / corrupted / foreign checkpoint with ``--resume``), 130 interrupted (Ctrl-C: the
+completed output intervals are in the checkpoint and the exact command that resumes the run is
+printed on stderr).
 """
 
 from __future__ import annotations
@@ -38,9 +44,23 @@ def _parse_value(text):
         return text
 
 
+def _version() -> str:
+    """The installed distribution's version (importlib.metadata), else ``jaxcoag.__version__``
+    (running from a source tree that is not installed)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("jaxcoag")
+    except metadata.PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxcoag", description="Differentiable dust coagulation in JAX. "
                                 "With no subcommand: `jaxcoag run` (the default 1 AU disk run).")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
+                   help="print the installed jaxcoag version and exit")
     sub = p.add_subparsers(dest="command")
 
     r = sub.add_parser("run", help="run a TOML scene with the binned engine (default: 1 AU disk, growth + "
@@ -76,6 +96,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--chunk", type=int, default=1, help="members integrated together (default 1: one after "
                    "the other, each with its own step sizes)")
     s.add_argument("--quick", action="store_true", help="coarse grid, few outputs")
+    s.add_argument("--no-progress", action="store_true", help="no progress bar (the bar counts finished members)")
+    s.add_argument("--no-figure", action="store_true", help="do not save the figure of the swept quantity "
+                   "(default: next to --out, e.g. sweep.png: final mass peak vs the parameters)")
 
     c = sub.add_parser("config", help="print the default run configuration (TOML with comments)")
     c.add_argument("--resolved", action="store_true", help="print every value incl. defaults instead")
@@ -136,7 +159,8 @@ def _cmd_plot(args) -> int:
     title = str(ds.attrs.get("run_name", os.path.basename(args.file)))
     d = os.path.dirname(os.path.abspath(out))
     os.makedirs(d, exist_ok=True)
-    panel(sol, kern, path=out, title=title)
+    fl = tuple(float(ds.attrs.get(k, "nan")) for k in ("m_frag_limit_g", "a_frag_limit_cm", "st_frag"))
+    panel(sol, kern, path=out, title=title, frag_limit=fl if fl[0] > 0 else None)
     print(f"jaxcoag plot: {sol.grid.nbins} bins, {len(sol.ts)} outputs up to t = {float(sol.ts[-1]) / 3.15576e7:.4g} yr"
           f" ({'with' if kern is not None else 'without'} the run's kernel); saved {out}")
     return 0
@@ -160,7 +184,8 @@ def _cmd_sweep(args) -> int:
         params[k.strip()] = vals
     if args.chunk < 1:
         raise runner.JaxcoagInputError("--chunk must be >= 1.")
-    ds, _ = runner.sweep_config(cfg, params, chunk=args.chunk, quick=args.quick, out=args.out)
+    ds, _ = runner.sweep_config(cfg, params, chunk=args.chunk, quick=args.quick, out=args.out,
+                                progress=not args.no_progress, figure=not args.no_figure)
     return 0 if int(ds.attrs["n_failed"]) == 0 else 1
 
 
@@ -180,7 +205,7 @@ def main(argv=None) -> int:
     from ._validate import JaxcoagInputError
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or (argv[0] not in _COMMANDS and argv[0] not in ("-h", "--help")):
+    if not argv or (argv[0] not in _COMMANDS and argv[0] not in ("-h", "--help", "--version")):
         argv = ["run"] + argv
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -201,10 +226,33 @@ def main(argv=None) -> int:
                      out=args.out, quick=args.quick)
             return 0
     except (JaxcoagInputError, ValueError, TypeError, OSError) as e:
-        print(f"jaxcoag {name}: error: {e}", file=sys.stderr)
+        msg = " ".join(str(e).split()) or type(e).__name__  # one line, no traceback
+        print(f"jaxcoag {name}: error: {msg}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as e:
+        _report_interrupt(name, argv, args, e)
+        return 130
     parser.print_help()
     return 1
+
+
+def _report_interrupt(name, argv, args, exc):
+    """Ctrl-C: say what was saved and print the exact command that continues the run (stderr)."""
+    import shlex
+
+    where = getattr(exc, "checkpoint", None)
+    if name != "run":
+        print(f"jaxcoag {name}: interrupted; nothing was saved.", file=sys.stderr)
+        return
+    if where:
+        cmd = list(argv) + ([] if "--resume" in argv else ["--resume"])
+        print(f"jaxcoag run: interrupted after {exc.segments_done} of {exc.n_segments} output intervals; "
+              f"checkpoint saved to {where}", file=sys.stderr)
+        print("resume with: " + shlex.join(["jaxcoag"] + cmd), file=sys.stderr)
+    else:
+        why = "--no-checkpoint" if getattr(args, "no_checkpoint", False) else "the run had not started"
+        print(f"jaxcoag run: interrupted; no checkpoint was saved ({why}).", file=sys.stderr)
+        print("run again with: " + shlex.join(["jaxcoag"] + list(argv)), file=sys.stderr)
 
 
 if __name__ == "__main__":

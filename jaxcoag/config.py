@@ -15,7 +15,9 @@ Schema (units in brackets; "req." = required, otherwise the default is shown)::
                      "azimuthal_drift", "settling"; give preset OR effects),
                      turbulence_method = "exact" | "ya" | "ch03" (TurbulenceOC07 St* method; default:
                      the preset's own, "exact" for an effects list),
-                     focusing = false, drag_regime = "auto" | "epstein" | "stokes"
+                     focusing = false, drag_regime = "auto" | "epstein" | "stokes",
+                     drag_convention = "ormel" | "dustpy" (Epstein law with c_g and
+                     1/(n sigma), thesis eq. 4.5; or DustPy's sqrt(8/pi) c_g and 1/(sqrt2 n sigma))
     [gas]            model (req.) = "mmsn_hayashi81" | "ch4_disk" | "local" | "molecular_cloud"
                      disk models: R_au (req.) [AU], alpha (req.) [-], z_H = 0 [gas scale
                      heights], M_star_msun = 1 [M_sun]; ch4_disk: rho_X = 1;
@@ -72,7 +74,7 @@ from . import constants as C
 from ._validate import JaxcoagInputError
 
 __all__ = ["RunConfig", "Built", "load", "loads", "from_dict", "default", "default_path", "build", "to_toml",
-           "SCHEMA", "EFFECT_NAMES", "GAS_MODELS", "SWEEPABLE", "set_value"]
+           "SCHEMA", "EFFECT_NAMES", "GAS_MODELS", "SWEEPABLE", "set_value", "n_bins", "check_memory"]
 
 _REQ = object()  # marker: required key
 _AUTO = None  # marker: computed default
@@ -87,6 +89,7 @@ SCHEMA = {
         "turbulence_method": (str, _AUTO, ("exact", "ya", "ch03")),
         "focusing": (bool, False, None),
         "drag_regime": (str, "auto", ("auto", "epstein", "stokes")),
+        "drag_convention": (str, "ormel", ("ormel", "dustpy")),
     },
     "gas": {
         "model": (str, _REQ, ("mmsn_hayashi81", "ch4_disk", "local", "molecular_cloud")),
@@ -533,14 +536,16 @@ def make_scene(cfg: RunConfig):
         if sc["preset"] is not None:
             base = scenes.get(sc["preset"], **({} if meth is None else {"method": meth}))
             # keep the preset's other fields (outcome, porosity, ...); set only what [scene] names
-            return dataclasses.replace(base, focusing=sc["focusing"], drag_regime=sc["drag_regime"])
+            return dataclasses.replace(base, focusing=sc["focusing"], drag_regime=sc["drag_regime"],
+                                       drag_convention=sc["drag_convention"])
         else:
             ctor = {"brownian": E.Brownian, "radial_drift": E.RadialDrift, "azimuthal_drift": E.AzimuthalDrift,
                     "settling": E.Settling}
             vel = tuple(E.TurbulenceOC07(method=meth or "exact") if e == "turbulence_oc07" else ctor[e]()
                         for e in sc["effects"])
             name = "custom"
-        return Scene(velocities=vel, focusing=sc["focusing"], drag_regime=sc["drag_regime"], name=name)
+        return Scene(velocities=vel, focusing=sc["focusing"], drag_regime=sc["drag_regime"], name=name,
+                     drag_convention=sc["drag_convention"])
     except (ValueError, TypeError, KeyError) as e:
         raise JaxcoagInputError(f"[scene] {e}") from e
 
@@ -614,6 +619,36 @@ def make_solver(cfg: RunConfig):
     return "kvaerno5"
 
 
+def n_bins(cfg: RunConfig) -> int:
+    """Number of bins of the config's grid, round(log10(m_max / m_min) bins_per_decade), without
+    building it (as :meth:`jaxcoag.binned.MassGrid.log`)."""
+    gr = cfg["grid"]
+    return int(round(math.log10(gr["m_max"] / gr["m_min"]) * gr["bins_per_decade"]))
+
+
+def check_memory(cfg: RunConfig):
+    """Refuse (JaxcoagInputError naming [grid] bins_per_decade) a config whose grid and scheme
+    tensors would not fit in memory, before any array is allocated: the estimate of
+    :func:`jaxcoag.binned.scheme.estimate_bytes` for [solver] scheme/order, fragmentation and an
+    implicit method ("auto" with fragmentation, "kvaerno5", "linearly_implicit_euler") against
+    :func:`jaxcoag.binned.grid.memory_limit_bytes`. Returns the estimate [bytes]."""
+    from .binned.grid import GRID_BYTES_PER_BIN, _gib, memory_limit_bytes
+    from .binned.scheme import check_memory as _check
+
+    nb = n_bins(cfg)
+    so = cfg["solver"]
+    gr = cfg["grid"]
+    fix = (f"lower [grid] bins_per_decade (now {gr['bins_per_decade']:g}) or narrow [grid] m_min..m_max "
+           f"({gr['m_min']:.3g}..{gr['m_max']:.3g} g)")
+    if nb * GRID_BYTES_PER_BIN > memory_limit_bytes():
+        raise JaxcoagInputError(f"{nb:.4g} bins would need {_gib(nb * GRID_BYTES_PER_BIN)} for the grid alone, more "
+                                f"than the limit of {_gib(memory_limit_bytes())}; {fix}.")
+    implicit = so["method"] in ("kvaerno5", "linearly_implicit_euler") or (so["method"] == "auto" and
+                                                                         cfg.has_fragmentation)
+    return _check(so["scheme"], nb, order=so["order"], fragmentation=cfg.has_fragmentation, implicit=implicit,
+                  fix=fix)
+
+
 def build(cfg: RunConfig) -> Built:
     """Build and check every object of a run (no files are touched).
 
@@ -622,6 +657,7 @@ def build(cfg: RunConfig) -> Built:
     """
     from .binned.solve import make_scheme
 
+    check_memory(cfg)
     scene = make_scene(cfg)
     g = cfg["gas"]
     if g["model"] == "molecular_cloud":

@@ -1,7 +1,6 @@
 """Physical constants in cgs units.
 
-The values are those used by the reference calculations of ``shared/spec/velocities.md`` §0.1
-(CODATA 2018 / IAU 2015 nominal values).
+CODATA 2018 / IAU 2015 nominal values (the set used for the reference values in the tests).
 """
 
 k_B = 1.380649e-16  # Boltzmann constant [erg K^-1] (CODATA 2018, exact)

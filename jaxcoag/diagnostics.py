@@ -4,7 +4,7 @@ All functions accept numpy or JAX arrays (mass per bin rho_b [g cm^-3] on a grid
 [g]) and broadcast over leading axes (e.g. output times), so they work on
 ``BinnedSolution.mass_per_bin`` directly and inside jit/grad.
 
-References: spec/montecarlo.md §5.1 (error metrics), §4.6 (bin-integrated targets);
+References: error metrics and noise floor in docs/design_notes.md (Monte Carlo conventions);
 Ormel (2008) thesis §5.3 (m^2 f(m) plots); Birnstiel et al. (2010) (mass peak).
 """
 
@@ -47,7 +47,7 @@ def moment(rho, edges, p):
         edges: bin edges [g] (nbins+1,) or a MassGrid; m_b is the geometric center.
         p: order (float; p = 1 is the total mass, p = 0 the number density [cm^-3]).
     Returns: array (...,).
-    References: thesis eq. 5.4 (moments); spec/montecarlo.md §4.5.
+    References: thesis eq. 5.4 (moments), Table 5.1.
     """
     le = _log_edges(edges)
     lc = 0.5 * (le[:-1] + le[1:])
@@ -66,7 +66,7 @@ def l1_error(rho, rho_ref):
 
     Arguments: rho, rho_ref: mass per bin [g cm^-3] on the same bins, (..., nbins).
     Returns: dimensionless array (...,) (0 = exact; 2 = disjoint supports).
-    References: spec/montecarlo.md §5.1 (E_mass is half of this for normalised spectra).
+    References: E_mass in docs/design_notes.md (it is half of this for normalised spectra).
     """
     rho = jnp.asarray(rho)
     rho_ref = jnp.asarray(rho_ref)

@@ -3,11 +3,11 @@
 Each effect contributes a squared relative velocity Delta v_k^2 [cm^2 s^-2] for pairs of
 particles; a scene adds the effects it names in quadrature (Ormel 2008 §4.3, text under eq. 4.26;
 as DustPy's ``vrel_tot``) and the kernel takes ONE safe square root of the total
-(spec/velocities.md §6, §8.1). An effect that is not named is never traced.
+(thesis §4.3; velocity hazard 1 in docs/design_notes.md). An effect that is not named is never traced.
 
 Per-particle work (e.g. the OC07 class boundary St*, a root solve) is done once per particle in
 ``per_particle`` and passed to ``dv2`` for the pairs, so an N x N kernel matrix costs N root
-solves, not N^2 (spec/velocities.md §8.6).
+solves, not N^2 (velocity hazard 6).
 
 Particle properties are passed as a :class:`Particles` record (mass, radius, area, friction time,
 Stokes number), broadcast-compatible between the two collision partners.
@@ -86,7 +86,7 @@ class Brownian(AbstractVelocity):
 
 class TurbulenceOC07(AbstractVelocity):
     """Turbulent relative velocity of Ormel & Cuzzi (2007), full closed form (thesis ch. 3,
-    eqs. 3.14-3.15 in the bounded-factor form of spec/velocities.md §4.3).
+    eqs. 3.14-3.15 in the bounded-factor form; velocity hazard 3).
 
     Attributes:
         method: "exact" (root of eq. 3.21), "ya" (t* = 1.6 tau_f) or "ch03" (static).
@@ -154,7 +154,6 @@ class TurbulenceW84(AbstractVelocity):
     (t_L = 2 pi/Omega, v_L = alpha^1/2 c_g: ``tL_factor=2*pi``) to reproduce ch. 2.
 
     References: Weidenschilling (1984) Icarus 60, 553; Ormel (2008) thesis eqs. 2.2-2.5;
-    spec/velocities.md §4.8.
     """
 
     name: ClassVar[str] = "turbulence_w84"
@@ -182,12 +181,12 @@ class EnlargementFactor(AbstractPorosity):
     A = pi a^2 = pi a*^2 psi^(2/3) [T2.6]; the Epstein friction time then follows as
     tau_f = 3 m/(4 c_g rho_g A) = rho_s a*/(c_g rho_g psi^(2/3)) [T2.4, T2.25]. psi = 1 is a
     compact sphere. The collision cross-section uses the same geometric radii (ch. 2, ch. 4:
-    sigma = pi (a1 + a2)^2, spec/collisions.md §1.4 "geometric").
+    sigma = pi (a1 + a2)^2, thesis §2.2.2 and ch. 4 footnote 6).
 
     Attributes:
         index: which structural parameter holds psi (static; default 0).
 
-    References: Ormel (2008) thesis eqs. 2.4, 2.6, 2.25; spec/collisions.md §1.1-§1.2.
+    References: Ormel (2008) thesis eqs. 2.4, 2.6, 2.25.
     """
 
     index: int = eqx.field(static=True, default=0)

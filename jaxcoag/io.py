@@ -3,8 +3,15 @@
 ``to_xarray(solution)`` turns a :class:`~jaxcoag.binned.BinnedSolution` into an
 ``xarray.Dataset`` with coordinates
 
-* ``time`` [s] (nt,),
+* ``time`` [s] (nt,), with ``t_yr`` [yr] (time) beside it: the same times in Julian years
+  (1 yr = 365.25 d = 3.15576e7 s, ``jaxcoag.constants.yr``),
 * ``mass`` [g] (nbins,) - geometric bin centers, and ``mass_edge`` [g] (nbins+1,) - edges,
+* where the physical state is known (``to_xarray(..., kernel=K)`` with a physical kernel such as
+  ``scene.kernel(gas, rho_s)``; ``jaxcoag run`` passes its kernel): the grain radius ``a`` [cm]
+  (mass) of the bin centers and their Stokes number ``St`` [1] (mass) = tau_f Omega_L in the run's
+  gas state (Ormel 2008 thesis eqs. 2.4, 4.5/4.6; ch. 4 footnote 5). An analytic kernel carries
+  no material density or gas state, so its dataset has neither ``a`` nor ``St`` (they are left
+  out rather than invented),
 
 and data variables ``mass_per_bin`` [g cm^-3] (time, mass), ``number_per_bin`` [cm^-3]
 (time, mass), ``gel_mass`` [g cm^-3] (time), ``mass_drift`` [-] (time), ``result_code`` (int,
@@ -20,7 +27,7 @@ point leaves no partial file at the target (a previous file there stays intact) 
 the temporary file.
 
 References: CF conventions 1.10 (units, long_name); xarray ``Dataset.to_netcdf``;
-DESIGN.md §1 (results -> io -> plot).
+docs/design_notes.md, house style (results -> io -> plot).
 """
 
 from __future__ import annotations
@@ -32,7 +39,7 @@ import numpy as np
 
 from ._validate import JaxcoagInputError
 
-__all__ = ["to_xarray", "save_netcdf", "load_netcdf", "result_table"]
+__all__ = ["to_xarray", "save_netcdf", "load_netcdf", "result_table", "time_coords", "particle_coords"]
 
 
 def _xr():
@@ -71,7 +78,35 @@ def _attr_value(v):
     return repr(v)
 
 
-def to_xarray(solution, *, attrs=None):
+def time_coords(t_s):
+    """CF-labelled time coordinates of output times ``t_s`` [s]: ``{"time": ... [s], "t_yr": ... [yr]}``
+    on the dimension ``time`` (t_yr = t / ``jaxcoag.constants.yr``, the Julian year 3.15576e7 s)."""
+    from . import constants as C
+
+    t = np.asarray(t_s, np.float64)
+    return {"time": ("time", t, {"units": "s", "long_name": "time"}),
+            "t_yr": ("time", t / C.yr, {"units": "yr", "long_name": "time in years",
+                                         "comment": f"Julian years: 1 yr = 365.25 d = {C.yr:.8g} s"})}
+
+
+def particle_coords(kernel, m, dim="mass"):
+    """Grain radius ``a`` [cm] and Stokes number ``St`` [1] of masses ``m`` [g] as coordinates on
+    ``dim``, from a physical kernel's ``particles(m)`` (its material density, drag law and gas
+    state: a = (3 m / (4 pi rho_s))^(1/3) for compact grains, St = tau_f / t_L with the Epstein /
+    Stokes friction time, Ormel 2008 thesis eqs. 2.4, 4.5, 4.6 and ch. 4 footnote 5).
+    Returns {} for kernels without ``particles`` (analytic kernels: no rho_s, no gas state)."""
+    if kernel is None or not hasattr(kernel, "particles"):
+        return {}
+    import jax.numpy as jnp
+
+    p = kernel.particles(jnp.asarray(np.asarray(m, np.float64)))
+    return {"a": (dim, np.asarray(p.a, np.float64),
+                  {"units": "cm", "long_name": "grain radius of the bin-center mass"}),
+            "St": (dim, np.asarray(p.st, np.float64),
+                   {"units": "1", "long_name": "Stokes number tau_f / t_L of the bin-center mass in the run's gas"})}
+
+
+def to_xarray(solution, *, attrs=None, kernel=None):
     """Labelled dataset of a binned solution.
 
     Arguments:
@@ -80,11 +115,15 @@ def to_xarray(solution, *, attrs=None):
         attrs: optional dict of global attributes (scene name, parameters such as
             ``alpha``, ``rho_g`` [g cm^-3], ``T`` [K], ``rho_s`` [g cm^-3], ...). Keys must be
             strings; values that netCDF cannot hold are stored as their ``repr``.
+        kernel: optional physical kernel (``scene.kernel(gas, rho_s)``, compact grains) that
+            the solution was computed with; adds the coordinates ``a`` [cm] and ``St`` [1] on
+            ``mass``. Kernels without ``particles`` (analytic kernels) add nothing.
 
     Returns:
-        xarray.Dataset with coords ``time`` [s], ``mass`` [g], ``mass_edge`` [g]; variables
-        ``mass_per_bin`` [g cm^-3], ``number_per_bin`` [cm^-3], ``gel_mass`` [g cm^-3],
-        ``mass_drift`` [-], ``result_code`` [-], ``steps``, ``rejected_steps``.
+        xarray.Dataset with coords ``time`` [s], ``t_yr`` [yr] (time), ``mass`` [g],
+        ``mass_edge`` [g], and with a physical kernel ``a`` [cm] and ``St`` [1] (mass);
+        variables ``mass_per_bin`` [g cm^-3], ``number_per_bin`` [cm^-3], ``gel_mass``
+        [g cm^-3], ``mass_drift`` [-], ``result_code`` [-], ``steps``, ``rejected_steps``.
 
     References: CF conventions (units / long_name attributes).
     """
@@ -122,11 +161,12 @@ def to_xarray(solution, *, attrs=None):
                                {"units": "1", "long_name": "rejected solver steps"}),
         },
         coords={
-            "time": ("time", np.asarray(solution.ts, np.float64), {"units": "s", "long_name": "time"}),
+            **time_coords(solution.ts),
             "mass": ("mass", np.asarray(grid.centers, np.float64),
                      {"units": "g", "long_name": "geometric bin-center mass sqrt(m_lo m_hi)"}),
             "mass_edge": ("mass_edge", np.asarray(grid.edges, np.float64),
                           {"units": "g", "long_name": "mass-bin edges"}),
+            **particle_coords(kernel, grid.centers),
         },
     )
     ds.attrs["title"] = "jaxcoag binned coagulation solution"
@@ -187,13 +227,15 @@ def atomic_write(path, write, *, what="output file"):
     return path
 
 
-def save_netcdf(ds_or_solution, path, *, attrs=None, engine=None):
+def save_netcdf(ds_or_solution, path, *, attrs=None, engine=None, kernel=None):
     """Write a dataset (or a BinnedSolution, via :func:`to_xarray`) to netCDF atomically.
 
     Arguments:
         ds_or_solution: xarray.Dataset or BinnedSolution.
         path: target file path (str or PathLike); its directory must exist.
         attrs: global attributes, only used when a solution is given.
+        kernel: the solution's physical kernel (adds ``a`` [cm] and ``St``; see :func:`to_xarray`),
+            only used when a solution is given.
         engine: xarray netCDF engine; default h5netcdf (then netcdf4, scipy).
 
     Returns:
@@ -207,9 +249,12 @@ def save_netcdf(ds_or_solution, path, *, attrs=None, engine=None):
     if isinstance(ds_or_solution, xr.Dataset):
         if attrs is not None:
             raise JaxcoagInputError("attrs is only used when saving a solution; set ds.attrs on a Dataset instead.")
+        if kernel is not None:
+            raise JaxcoagInputError("kernel is only used when saving a solution; build the Dataset with "
+                                    "to_xarray(solution, kernel=K) instead.")
         ds = ds_or_solution
     else:
-        ds = to_xarray(ds_or_solution, attrs=attrs)
+        ds = to_xarray(ds_or_solution, attrs=attrs, kernel=kernel)
     path = os.fspath(path)
     if os.path.isdir(path):
         raise JaxcoagInputError(f"{path!r} is a directory; give a file path such as {os.path.join(path, 'run.nc')!r}.")

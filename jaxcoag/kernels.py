@@ -11,8 +11,8 @@ type (structure). Every kernel evaluates vectorised on broadcasting pairs:
 Kernels with structural parameters (porosity, ...) accept optional per-particle arrays
 ``x1, x2`` with a trailing axis of length ``n_struct``; analytic kernels ignore them.
 
-References: Ormel (2008) thesis Table 5.1 (constant, sum, product); spec/montecarlo.md §3.3
-(log kernels); Smoluchowski (1916), Golovin (1963), Trubnikov (1971).
+References: Ormel (2008) thesis Table 5.1 (constant, sum, product); log kernels
+(MC rates in log space, docs/design_notes.md); Smoluchowski (1916), Golovin (1963), Trubnikov (1971).
 """
 
 from __future__ import annotations

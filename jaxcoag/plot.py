@@ -2,8 +2,13 @@
 
 ``panel(solution, kernel=None, path=None)`` draws four axes:
 
-(a) m^2 f(m) = d rho / d ln m [g cm^-3] against m [g] at every output time (colour = time);
-(b) mass-peak history m_p(t) [g] (``diagnostics.mass_peak``) against t [s];
+(a) m^2 f(m) = d rho / d ln m [g cm^-3] against m [g] at every output time, coloured by time
+    with a colour bar in years (log scale when the positive output times span more than a
+    decade); with ``frag_limit`` a labelled vertical line marks the fragmentation-limited size
+    (Birnstiel et al. 2012: St_frag = v_frag^2 / (3 alpha c_s^2), converted to a mass with the
+    scene's drag law, :func:`jaxcoag.runner.frag_limited_size`);
+(b) mass-peak history m_p(t) [g] (``diagnostics.mass_peak``) against t [yr] (t [s] for runs
+    shorter than 0.01 yr, e.g. dimensionless analytic-kernel tests);
 (c) Stokes number St(m) = tau_f / t_L of the bin centers (needs a physical kernel with
     ``particles(m)``, e.g. ``scenes.nebula_ch4().kernel(gas, rho_s)``);
 (d) relative-velocity map Delta v(m1, m2) [cm s^-1] on the bin centers (needs a kernel with
@@ -23,15 +28,36 @@ import os
 
 import numpy as np
 
+from . import constants as C
 from . import diagnostics
 from ._validate import JaxcoagInputError
 
-__all__ = ["panel"]
+__all__ = ["panel", "time_norm", "sweep_panel"]
+
+
+def time_norm(t_s):
+    """Colour normalisation for output times t_s [s] in the unit the panel uses.
+
+    Returns (values, norm, label): the times in years (or seconds when t_s[-1] < 0.01 yr),
+    a ``matplotlib.colors.LogNorm`` over the positive values when they span more than a decade
+    (t = 0 is drawn in the lowest colour), a ``Normalize`` otherwise, and the axis label.
+    """
+    from matplotlib import colors
+
+    t = np.asarray(t_s, np.float64)
+    years = t.size > 0 and t[-1] >= 0.01 * C.yr
+    v = t / C.yr if years else t
+    label = "t [yr]" if years else "t [s]"
+    pos = v[v > 0]
+    if pos.size >= 2 and pos.max() > 10 * pos.min():
+        return v, colors.LogNorm(vmin=pos.min(), vmax=pos.max(), clip=True), label
+    hi = v.max() if v.size and v.max() > v.min() else (v.min() + 1.0 if v.size else 1.0)
+    return v, colors.Normalize(vmin=v.min() if v.size else 0.0, vmax=hi), label
 
 
 
 
-def panel(solution, kernel=None, path=None, *, dpi=110, title=None):
+def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=None):
     """Four-panel overview of a :class:`~jaxcoag.binned.BinnedSolution`.
 
     Arguments:
@@ -40,13 +66,20 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None):
             relative-velocity panels; analytic kernels with ``relative_velocity2`` draw (d) only.
         path: optional PNG path; the directory must exist.
         dpi: resolution of the saved PNG; title: figure title.
+        frag_limit: optional (m_frag [g], a_frag [cm], St_frag) of the fragmentation barrier
+            (``jaxcoag run`` passes St_frag = v_frag^2 / (3 alpha c_s^2) and its size from
+            :func:`jaxcoag.runner.frag_limited_size`): a dashed vertical line at m_frag on (a),
+            labelled with a_frag and St_frag, and a horizontal line at St_frag on (c).
 
     Returns:
-        matplotlib.figure.Figure with axes [m2f, peak, stokes, dv]; the m^2 f lines of axis 0
-        are in time order (ydata = ``diagnostics.m2f(solution.mass_per_bin, grid)[i]``).
+        matplotlib.figure.Figure with axes [m2f, peak, stokes, dv, then colour bars: time (of
+        axis 0) and, with a kernel, Delta v]; the first ``nt`` lines of axis 0 are the m^2 f
+        curves in time order (ydata = ``diagnostics.m2f(solution.mass_per_bin, grid)[i]``), the
+        fragmentation line (gid ``"frag_limit"``) comes after them.
     """
     from matplotlib.figure import Figure
     from matplotlib import cm, colors
+    from matplotlib.cm import ScalarMappable
     from .binned import BinnedSolution
 
     if not isinstance(solution, BinnedSolution):
@@ -69,11 +102,25 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None):
     ax = fig.subplots(2, 2).ravel()
     ax_f, ax_p, ax_s, ax_v = ax
 
-    # (a) m^2 f over time
-    norm = colors.Normalize(vmin=0, vmax=max(len(t) - 1, 1))
+    if frag_limit is not None:
+        try:
+            m_fr, a_fr, st_fr = (float(v) for v in frag_limit)
+        except (TypeError, ValueError):
+            raise JaxcoagInputError("frag_limit must be (m_frag [g], a_frag [cm], St_frag), three numbers.") from None
+        if not (m_fr > 0 and np.isfinite(m_fr)):
+            raise JaxcoagInputError(f"frag_limit mass must be a positive finite number of grams, got {m_fr!r}.")
+
+    # (a) m^2 f over time, coloured by time with a colour bar
+    tv, tnorm, tlabel = time_norm(t)
     cmap = cm.viridis
+    unit = tlabel[3:-1]
+    pos_t = tv[tv > 0]
+    floor = pos_t.min() if isinstance(tnorm, colors.LogNorm) else tv.min()
     for i in range(len(t)):
-        ax_f.plot(m, y[i], color=cmap(norm(i)), lw=1.3, label=f"t = {t[i]:.3g} s")
+        ax_f.plot(m, y[i], color=cmap(tnorm(max(tv[i], floor))), lw=1.3, label=f"t = {tv[i]:.3g} {unit}")
+    sm = ScalarMappable(norm=tnorm, cmap=cmap)
+    sm.set_array(tv)
+    fig.colorbar(sm, ax=ax_f, label=tlabel + (" (log scale)" if isinstance(tnorm, colors.LogNorm) else ""))
     pos = y[y > 0]
     ax_f.set_xscale("log")
     ax_f.set_yscale("log")
@@ -82,18 +129,29 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None):
     ax_f.set_xlabel("m [g]")
     ax_f.set_ylabel(r"$m^2 f(m)$ = d$\rho$/d ln m [g cm$^{-3}$]")
     ax_f.set_title("(a) mass distribution")
+    if frag_limit is not None:
+        ax_f.axvline(m_fr, color="C3", ls="--", lw=1.2, gid="frag_limit",
+                     label=f"fragmentation limit a = {a_fr:.3g} cm (St = {st_fr:.3g})")
+        ax_f.text(m_fr, 0.97, f" fragmentation limit\n a = {a_fr:.3g} cm\n St = {st_fr:.3g}", color="C3", fontsize=8,
+                  ha="left", va="top", transform=ax_f.get_xaxis_transform())
     if len(t) <= 8:
         ax_f.legend(fontsize=7)
 
     # (b) mass-peak history
     mp = np.array([float(diagnostics.mass_peak(r, grid)) for r in rho])
-    ax_p.plot(t, mp, "o-", color="C3")
+    ax_p.plot(tv, mp, "o-", color="C3")
     ax_p.set_yscale("log")
-    if np.all(t > 0) or (len(t) > 2 and t[1] > 0 and t[0] == 0 and t[-1] / t[1] > 30):
-        ax_p.set_xscale("symlog", linthresh=t[1] if t[0] == 0 else t[0])
-        if t[0] >= 0:
+    if np.all(tv > 0) or (len(tv) > 2 and tv[1] > 0 and tv[0] == 0 and tv[-1] / tv[1] > 30):
+        ax_p.set_xscale("symlog", linthresh=tv[1] if tv[0] == 0 else tv[0])
+        if tv[0] >= 0:
             ax_p.set_xlim(left=0.0)  # symlog would otherwise show negative times
-    ax_p.set_xlabel("t [s]")
+    if frag_limit is not None:
+        ax_p.axhline(m_fr, color="C3", ls="--", lw=1.0, label="fragmentation limit")
+        good = mp[np.isfinite(mp) & (mp > 0)]
+        if good.size:
+            ax_p.set_ylim(min(good.min(), m_fr) / 3, max(good.max(), m_fr) * 3)
+        ax_p.legend(fontsize=7)
+    ax_p.set_xlabel(tlabel)
     ax_p.set_ylabel(r"mass peak $m_p$ [g]")
     ax_p.set_title("(b) mass-peak history")
 
@@ -102,6 +160,10 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None):
         st = np.asarray(kernel.particles(m).st)
         ax_s.loglog(m, st, color="C0")
         ax_s.axhline(1.0, color="0.6", ls=":")
+        if frag_limit is not None:
+            ax_s.axhline(st_fr, color="C3", ls="--", lw=1.0, label=r"St$_{\rm frag}$ = " + f"{st_fr:.3g}")
+            ax_s.axvline(m_fr, color="C3", ls="--", lw=1.0)
+            ax_s.legend(fontsize=7)
         ax_s.set_ylabel("Stokes number St")
     else:
         ax_s.text(0.5, 0.5, "pass a physical kernel\n(scene.kernel(gas, rho_s))\nfor St(m)", ha="center",
@@ -125,6 +187,120 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None):
                   transform=ax_v.transAxes)
     ax_v.set_xlabel("m1 [g]")
     ax_v.set_title("(d) relative velocity")
+    if title:
+        fig.suptitle(title)
+    if path is not None:
+        fig.savefig(os.fspath(path), dpi=dpi, format="png")
+    return fig
+
+
+def sweep_panel(ds, path=None, *, dpi=110, title=None):
+    """Figure of a parameter sweep written by :func:`jaxcoag.runner.sweep_config` (``jaxcoag sweep``).
+
+    Axes:
+        (a) the mass peak at the last output time [g] (``mass_peak``) against the first swept
+            parameter, one line per combination of the others (log axes where the values are
+            positive and span a decade or more); failed members (status != 0) are marked x;
+        (b) the final m^2 f(m) = d rho / d ln m [g cm^-3] of every member against m [g],
+            coloured by the first swept parameter with a colour bar (LogNorm over a span of a
+            decade or more, else Normalize), line style cycling over the other parameters;
+        (c) with exactly two swept parameters: a colour map of log10 m_peak over both.
+
+    Arguments:
+        ds: the sweep dataset (coords = swept parameters in ``attrs["swept"]`` order, then
+            ``time``, ``mass``, ``mass_edge``; variables ``mass_per_bin``, ``mass_peak``, ``status``).
+        path: optional PNG path (its directory must exist); dpi: PNG resolution; title: suptitle.
+
+    Returns:
+        matplotlib.figure.Figure; ``fig.axes[0].lines`` are the m_peak curves (ydata =
+        ``ds.mass_peak`` along the first parameter), ``fig.axes[1].lines`` the final m^2 f curves
+        in member order (C order over the swept parameters), then empty line-style key handles.
+    """
+    from matplotlib.figure import Figure
+    from matplotlib import cm, colors
+    from matplotlib.cm import ScalarMappable
+
+    swept = [k for k in str(ds.attrs.get("swept", "")).split(",") if k]
+    need = ("mass_per_bin", "mass_peak", "status", "mass_edge")
+    if not swept or any(k not in ds.variables for k in need + tuple(swept)):
+        raise JaxcoagInputError("sweep_panel needs a dataset written by jaxcoag.runner.sweep_config / `jaxcoag sweep` "
+                                f"(swept parameters in attrs['swept'] and variables {list(need)}).")
+    if path is not None:
+        d = os.path.dirname(os.path.abspath(os.fspath(path)))
+        if not os.path.isdir(d):
+            raise JaxcoagInputError(f"directory {d!r} for the PNG does not exist.")
+    p0, rest = swept[0], swept[1:]
+    x = np.asarray(ds[p0].values, np.float64)
+    mp = np.asarray(ds["mass_peak"].transpose(*swept).values, np.float64).reshape(x.size, -1)
+    st = np.asarray(ds["status"].transpose(*swept).values).reshape(x.size, -1)
+    rho = np.asarray(ds["mass_per_bin"].isel(time=-1).transpose(*swept, "mass").values, np.float64)
+    rho = rho.reshape(x.size, -1, rho.shape[-1])
+    e = np.asarray(ds["mass_edge"].values, np.float64)
+    m = np.sqrt(e[:-1] * e[1:])
+    y = rho / np.diff(np.log(e))
+    combos = [dict(zip(rest, v)) for v in np.array(np.meshgrid(*[ds[k].values for k in rest],
+                                                              indexing="ij")).reshape(len(rest), -1).T] if rest else [{}]
+
+    def _log_ok(v):
+        v = v[np.isfinite(v)]
+        return v.size > 1 and np.all(v > 0) and v.max() >= 10 * v.min()
+
+    fig = Figure(figsize=(13 if len(swept) == 2 else 11, 4.6), layout="constrained")
+    ax = fig.subplots(1, 3 if len(swept) == 2 else 2)
+    ax_m, ax_f = ax[0], ax[1]
+    for j, c in enumerate(combos):
+        lab = ", ".join(f"{k} = {v:.3g}" for k, v in c.items()) or None
+        line, = ax_m.plot(x, mp[:, j], "o-", label=lab if j < 10 else None)
+        bad = st[:, j] != 0
+        if np.any(bad):
+            ax_m.plot(x[bad], np.where(np.isfinite(mp[bad, j]), mp[bad, j], np.nanmin(mp)), "x", color="k", ms=9,
+                      label="failed" if j == 0 else None)
+    if _log_ok(x):
+        ax_m.set_xscale("log")
+    if _log_ok(mp.ravel()) or np.all(mp[np.isfinite(mp)] > 0):
+        ax_m.set_yscale("log")
+    ax_m.set_xlabel(p0)
+    ax_m.set_ylabel(r"mass peak $m_p$ at $t_{\rm end}$ [g]")
+    ax_m.set_title(f"(a) mass peak vs {p0}")
+    if rest or np.any(st != 0):
+        ax_m.legend(fontsize=7)
+
+    norm = colors.LogNorm(vmin=x.min(), vmax=x.max()) if _log_ok(x) else \
+        colors.Normalize(vmin=x.min(), vmax=x.max() if x.max() > x.min() else x.min() + 1.0)
+    cmap = cm.viridis
+    styles = ["-", "--", ":", "-."]
+    for i in range(x.size):
+        for j in range(len(combos)):
+            ax_f.plot(m, y[i, j], color=cmap(norm(x[i])), ls=styles[j % len(styles)], lw=1.2)
+    if rest:  # line-style key for the other parameters (empty handles, after the member curves)
+        for j, c in enumerate(combos[:len(styles)]):
+            ax_f.plot([], [], color="0.3", ls=styles[j], label=", ".join(f"{k} = {v:.3g}" for k, v in c.items()))
+        ax_f.legend(fontsize=7)
+    sm = ScalarMappable(norm=norm, cmap=cmap)
+    sm.set_array(x)
+    fig.colorbar(sm, ax=ax_f, label=p0)
+    pos = y[np.isfinite(y) & (y > 0)]
+    ax_f.set_xscale("log")
+    ax_f.set_yscale("log")
+    if pos.size:
+        ax_f.set_ylim(max(pos.min(), pos.max() * 1e-8), pos.max() * 3)
+    ax_f.set_xlabel("m [g]")
+    ax_f.set_ylabel(r"$m^2 f(m)$ at $t_{\rm end}$ [g cm$^{-3}$]")
+    ax_f.set_title("(b) final mass distributions")
+
+    if len(swept) == 2:
+        ax_c = ax[2]
+        x1 = np.asarray(ds[rest[0]].values, np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.log10(mp)
+        pc = ax_c.pcolormesh(np.arange(x.size + 1) - 0.5, np.arange(x1.size + 1) - 0.5, z.T, cmap="viridis",
+                             shading="flat")
+        ax_c.set_xticks(np.arange(x.size), [f"{v:.3g}" for v in x], rotation=45, fontsize=7)
+        ax_c.set_yticks(np.arange(x1.size), [f"{v:.3g}" for v in x1], fontsize=7)
+        ax_c.set_xlabel(p0)
+        ax_c.set_ylabel(rest[0])
+        fig.colorbar(pc, ax=ax_c, label=r"log$_{10}$ $m_p$ [g]")
+        ax_c.set_title("(c) mass peak map")
     if title:
         fig.suptitle(title)
     if path is not None:

@@ -30,7 +30,8 @@ from . import diagnostics
 from ._validate import JaxcoagInputError
 
 __all__ = ["run", "RunResult", "quick_config", "solution_from_dataset", "kernel_from_dataset", "summary_rows",
-           "format_summary", "sweep_config", "figure_path", "checkpoint_path"]
+           "format_summary", "sweep_config", "figure_path", "checkpoint_path", "st_frag", "frag_limited_size",
+           "check_writable"]
 
 
 class RunResult:
@@ -103,6 +104,37 @@ def st_frag(built):
     return fr["v_frag"] ** 2 / (3.0 * float(built.gas.alpha) * float(built.gas.c_g) ** 2)
 
 
+def frag_limited_size(kernel, st_target, *, m_lo=1e-30, m_hi=1e30):
+    """Mass [g] and radius [cm] of the grain whose Stokes number equals ``st_target`` in the
+    kernel's gas state with its own drag law (Epstein / Stokes switch, Ormel 2008 eqs. 4.5, 4.6),
+    e.g. the fragmentation-limited size for St_frag = v_frag^2 / (3 alpha c_s^2) (Birnstiel et al.
+    2012, eq. 8). St(m) of compact grains increases monotonically with m, so the root is found by
+    bracketing on log-spaced masses and refining (relative precision ~1e-13 in m).
+
+    Returns: (m [g], a [cm]); (nan, nan) when st_target is not finite and positive, the kernel
+    has no ``particles`` (analytic kernels) or St(m) never reaches st_target in [m_lo, m_hi].
+    """
+    nan = (float("nan"), float("nan"))
+    if kernel is None or not hasattr(kernel, "particles") or int(getattr(kernel, "n_struct", 0)) != 0:
+        return nan
+    if not (np.isfinite(st_target) and st_target > 0):
+        return nan
+    lo, hi = np.log(m_lo), np.log(m_hi)
+    for _ in range(4):  # bracket width 138 / 1024^4 ~ 1e-10 in ln m
+        lm = np.linspace(lo, hi, 1025)
+        st = np.asarray(kernel.particles(jnp.asarray(np.exp(lm))).st, np.float64)
+        above = np.nonzero(st >= st_target)[0]
+        if above.size == 0 or above[0] == 0:
+            return nan
+        i = int(above[0])
+        lo, hi = lm[i - 1], lm[i]
+    # final step: interpolate ln St linearly in ln m inside the last bracket
+    s_lo, s_hi = (float(np.log(v)) for v in np.asarray(kernel.particles(jnp.asarray(np.exp([lo, hi]))).st))
+    lm = lo + (np.log(st_target) - s_lo) / (s_hi - s_lo) * (hi - lo) if s_hi > s_lo else hi
+    m = float(np.exp(lm))
+    return m, float(np.asarray(kernel.particles(jnp.asarray(m)).a))
+
+
 def summary_rows(sol, kernel):
     """Per-output summary: t [yr], mass peak m_p [g], its radius a_p [cm] and St_p, the largest
     Stokes number among bins holding > 1e-3 of the mass per ln m peak, and the mass drift."""
@@ -156,6 +188,50 @@ def format_summary(res) -> str:
     return "\n".join(lines)
 
 
+def check_writable(path, what="output file", flag="--out"):
+    """Refuse (JaxcoagInputError saying what to change) a file path that cannot be written,
+    before any computation, without leaving anything behind: the path must not be a directory;
+    its directory must exist and accept a new file (probed with a temporary file that is removed
+    at once) or be creatable (the nearest existing ancestor is a writable directory).
+
+    Arguments: path; what: name of the file in the message; flag: the option to change.
+    """
+    import tempfile
+
+    p = os.path.abspath(os.fspath(path))
+    if os.path.isdir(p):
+        raise JaxcoagInputError(f"the {what} {path!r} is a directory; give a file name with {flag}.")
+    if os.path.exists(p) and not os.path.isfile(p):
+        raise JaxcoagInputError(f"the {what} {path!r} exists and is not a regular file; change {flag}.")
+    d = os.path.dirname(p)
+    a = d
+    while not os.path.exists(a):
+        a = os.path.dirname(a)
+    if not os.path.isdir(a):
+        raise JaxcoagInputError(f"cannot write the {what} {path!r}: {a!r} is a file, not a directory; change {flag}.")
+    if a == d:
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=".jaxcoag-write-test-", dir=d)
+            os.close(fd)
+            os.remove(tmp)
+        except OSError as e:
+            raise JaxcoagInputError(f"cannot write the {what} into {d!r} ({e.strerror}); change {flag} or the "
+                                    "directory's permissions.") from None
+    elif not os.access(a, os.W_OK | os.X_OK):
+        raise JaxcoagInputError(f"cannot create the directory of the {what} {path!r}: {a!r} is not writable; "
+                                f"change {flag} or the directory's permissions.")
+
+
+def _makedirs_for(path):
+    """Create the directory of ``path`` (checked by :func:`check_writable` beforehand)."""
+    d = os.path.dirname(os.path.abspath(path))
+    try:
+        os.makedirs(d, exist_ok=True)
+    except OSError as e:
+        raise JaxcoagInputError(f"cannot create the directory {d!r} ({e.strerror}); choose another "
+                                "--out / --checkpoint location.") from e
+
+
 def _as_config(cfg):
     """A RunConfig from None (the built-in default), a TOML path, a dict or a RunConfig."""
     if cfg is None:
@@ -183,10 +259,14 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
         figure: save the panel (default ``[output] figure``).
         max_segments: stop after this many new segments (resume later).
         quick: shrink the config with :func:`quick_config` (tests, smoke runs).
-        verbose: print the summary table; save: write netCDF/PNG (False: only the checkpoint).
+        verbose: print the summary table; save: write the checkpoint, netCDF and PNG (False:
+            write nothing at all, no directory either; a checkpoint is still read for ``resume``).
 
-    Returns: :class:`RunResult`. Raises JaxcoagInputError (before writing anything) for a bad
-    configuration, output path or mismatched checkpoint.
+    Returns: :class:`RunResult`. Raises JaxcoagInputError before computing or writing anything
+    for a bad configuration, a grid too large for the memory (:func:`config.check_memory`), an
+    output location that cannot be written (:func:`check_writable`) or a checkpoint that is
+    unreadable, corrupted or from another configuration (with ``resume``). Ctrl-C raises
+    :class:`jaxcoag.checkpoint.RunInterrupted` after checkpointing the completed segments.
     """
     from . import checkpoint as ckmod
     from . import io
@@ -195,7 +275,7 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
     cfg = _as_config(cfg)
     if quick:
         cfg = quick_config(cfg)
-    built = cfgmod.build(cfg)
+    cfgmod.check_memory(cfg)  # a grid too large for the memory: refused before anything else
     out = os.fspath(out) if out is not None else cfg["output"]["path"]
     if not out or out.endswith(os.sep) or os.path.isdir(out):
         raise JaxcoagInputError(f"--out must name a netCDF file (e.g. results/run.nc), got {out!r}.")
@@ -207,18 +287,24 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
         checkpoint = None
     else:
         checkpoint = os.fspath(checkpoint)
+    if save:  # every output location must be writable before anything is built or computed
+        check_writable(out, "netCDF output", "--out")
+        if checkpoint:
+            check_writable(checkpoint, "checkpoint", "--checkpoint (or use --no-checkpoint)")
+    built = cfgmod.build(cfg)
     scheme = built.scheme
     y0 = scheme.init(built.grid, jnp.asarray(built.n0))
     if resume and checkpoint and os.path.exists(checkpoint):  # refuse a mismatch before writing anything
         ckmod.load_checkpoint(checkpoint, config_hash=cfg.physics_hash(), ts=built.ts, ny=int(y0.shape[0]))
-    for p in filter(None, (out, checkpoint)):
-        d = os.path.dirname(os.path.abspath(p))
-        os.makedirs(d, exist_ok=True)
+    if save and checkpoint:  # the netCDF directory is made when the result is saved (none if interrupted)
+        _makedirs_for(checkpoint)
 
     seg = ckmod.integrate(built.kernel, built.grid, y0, built.ts, scheme=scheme, fragmentation=built.fragmentation,
                           solver=built.solver, rtol=built.rtol, atol=built.atol, max_steps=built.max_steps,
                           checkpoint=checkpoint, resume=resume, config_hash=cfg.physics_hash(), progress=progress,
-                          max_segments=max_segments, desc=f"jaxcoag run {cfg['run']['name']}")
+                          max_segments=max_segments, desc=f"jaxcoag run {cfg['run']['name']}", save=save)
+    if not save:
+        checkpoint = None  # nothing was written
     sol = seg.solution
     rows = summary_rows(sol, built.kernel)
     from .io import result_table
@@ -233,16 +319,22 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
         attrs = _attrs(cfg, built)
         attrs["wall_s"] = wall
         attrs["segments"] = seg.n_segments_done
-        ds = io.to_xarray(sol, attrs=attrs)
+        sf = st_frag(built)
+        m_fr, a_fr = frag_limited_size(built.kernel, sf)
+        if np.isfinite(sf):  # fragmentation barrier (Birnstiel et al. 2012): St, mass [g], radius [cm]
+            attrs.update(st_frag=sf, m_frag_limit_g=m_fr, a_frag_limit_cm=a_fr)
+        ds = io.to_xarray(sol, attrs=attrs, kernel=built.kernel)
         ds["segment_steps"] = (("segment",), np.asarray(seg.seg_steps[:seg.n_segments_done], np.int64),
                                {"units": "1", "long_name": "accepted solver steps per output interval"})
+        _makedirs_for(out)
         path = io.save_netcdf(ds, out)
         if figure:
             from .plot import panel
             fig = figure_path(out)
             where = (f"n = {cfg['gas']['n']:.3g} cm^-3 cloud core" if cfg["gas"]["model"] == "molecular_cloud"
                      else f"alpha = {float(built.gas.alpha):.2g}, R = {float(built.gas.R) / C.AU:.3g} AU")
-            panel(sol, built.kernel, path=fig, title=f"{cfg['run']['name']}: {built.scene.name}, {where}")
+            panel(sol, built.kernel, path=fig, title=f"{cfg['run']['name']}: {built.scene.name}, {where}",
+                  frag_limit=(m_fr, a_fr, sf) if np.isfinite(m_fr) else None)
     res = RunResult(solution=sol, built=built, path=path, figure=fig, checkpoint=checkpoint, finished=seg.finished,
                     wall_s=time.perf_counter() - t_start, rows=rows, numbers=numbers, seg_steps=seg.seg_steps,
                     seg_wall_s=seg.seg_wall_s, resumed_from=seg.resumed_from, failed=seg.failed)
@@ -303,7 +395,7 @@ def _sweep_name(name):
     return dotted, dotted.split(".")[1]
 
 
-def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=None):
+def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=None, progress=None, figure=True):
     """Sweep scalar parameters of a configuration (outer product) in one compiled program.
 
     Arguments:
@@ -313,11 +405,17 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
             config first (a bad value is refused before any computation). Sweeping rho_s keeps
             the monomer *mass* (so the grid) fixed.
         chunk: members integrated at once (``jaxcoag.sweep.sweep`` chunk; 1 = one after the
-            other, each with its own adaptive steps - implicit solvers batch poorly, DESIGN §5).
+            other, each with its own adaptive steps - implicit solvers batch poorly, docs/design_notes.md).
         quick: shrink the config first (:func:`quick_config`); out: netCDF path to save.
+        progress: tqdm bar over the members on stderr (default: as ``verbose``); the members
+            then run in blocks of ``chunk`` from Python (:func:`jaxcoag.sweep.sweep`).
+        figure: with ``out``, also save :func:`jaxcoag.plot.sweep_panel` next to it (sweep.png).
 
     Returns: (xarray.Dataset, list of row dicts). The dataset holds mass_per_bin (params...,
-    time, mass), status per member, ``mass_peak`` [g] at the last output time, and the config.
+    time, mass), status per member, ``mass_peak`` [g] at the last output time, the grain radius
+    ``a`` [cm] and Stokes number ``St`` [1] of the bin centres per member (params..., mass; from
+    each member's kernel, i.e. its rho_s and gas state), coords ``time`` [s] and ``t_yr`` [yr],
+    and the config. The figure path is ``ds.attrs["figure"]`` when one was saved.
     """
     from . import io
     from . import sweep as swmod
@@ -327,6 +425,10 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
         cfg = quick_config(cfg)
     if not params:
         raise JaxcoagInputError("give at least one --param name=v1,v2,... to sweep.")
+    if out is not None:  # an unwritable output is refused before the sweep is computed
+        check_writable(out, "netCDF output", "--out")
+        if figure:
+            check_writable(figure_path(os.fspath(out)), "sweep figure", "--out (or use --no-figure)")
     params = dict(params)
     names = {}
     for k, vals in params.items():
@@ -371,7 +473,10 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     attrs = {"config_toml": cfg.to_toml(), "config_hash": cfg.physics_hash(), "scene": scene.name,
              "swept": ",".join(names[d] for d in names)}
     t0 = time.perf_counter()
-    ds = swmod.sweep(fn, sweep_params, chunk=chunk, attrs=attrs)
+    if progress is None:
+        progress = verbose
+    ds = swmod.sweep(fn, sweep_params, chunk=chunk, attrs=attrs,
+                     progress=f"jaxcoag sweep {cfg['run']['name']}" if progress else False)
     wall = time.perf_counter() - t0
     rho_last = ds["mass_per_bin"].isel(time=-1).values
     flat = rho_last.reshape(-1, rho_last.shape[-1])
@@ -379,6 +484,23 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     pdims = tuple(sweep_params)
     ds["mass_peak"] = (pdims, mp.reshape(rho_last.shape[:-1]),
                        {"units": "g", "long_name": "mass peak at the last output time"})
+    # grain radius and Stokes number of the bin centres in every member's own gas / material
+    a_m = np.empty(rho_last.shape[:-1] + (grid.nbins,))
+    st_m = np.empty_like(a_m)
+    mesh0 = np.meshgrid(*[sweep_params[k] for k in pdims], indexing="ij")
+    mc = jnp.asarray(np.asarray(grid.centers))
+    for idx in np.ndindex(*a_m.shape[:-1]):
+        over = {s: {} for s in ("gas", "dust")}
+        for k, mm in zip(pdims, mesh0):
+            sec, key = dotted_of[k].split(".")
+            if sec in over:
+                over[sec][key] = float(mm[idx])
+        du = dict(cfg["dust"], **over["dust"])
+        pp = scene.kernel(cfgmod.make_gas(cfg["gas"], **over["gas"]), rho_s=du["rho_s"]).particles(mc)
+        a_m[idx], st_m[idx] = np.asarray(pp.a), np.asarray(pp.st)
+    ds["a"] = (pdims + ("mass",), a_m, {"units": "cm", "long_name": "grain radius of the bin-center mass"})
+    ds["St"] = (pdims + ("mass",), st_m, {"units": "1", "long_name": "Stokes number tau_f / t_L of the bin-center "
+                                                                     "mass in the member's gas"})
     ds.attrs["wall_s"] = wall
     from .io import result_table
     table = result_table()
@@ -394,7 +516,13 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     if out is not None:
         out = os.fspath(out)
         os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+        if figure:
+            from .plot import sweep_panel
+            ds.attrs["figure"] = figure_path(out)
         path = io.save_netcdf(ds, out)
+        if figure:
+            sweep_panel(ds, path=ds.attrs["figure"], title=f"jaxcoag sweep of '{cfg['run']['name']}' ({scene.name}), "
+                        f"t_end = {float(built.ts[-1]) / C.yr:.4g} yr")
     if verbose:
         hdr = " ".join(f"{k:>12}" for k in pdims) + f" {'status':>18} {'m_peak [g]':>11} {'mass drift':>11}"
         print(f"jaxcoag sweep of '{cfg['run']['name']}' over {list(pdims)}: {mp.size} members, "
@@ -403,5 +531,6 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
         for r in rows:
             print(" ".join(f"{r[k]:12.4g}" for k in pdims) + f" {r['status'] or 'successful':>18} "
                   f"{r['m_peak']:11.4g} {r['mass_drift']:11.2e}")
-        print(f"{int(ds.attrs['n_failed'])} failed" + (f"; saved {path}" if path else ""))
+        print(f"{int(ds.attrs['n_failed'])} failed" + (f"; saved {path}" if path else "")
+              + (f" and {ds.attrs['figure']}" if path and "figure" in ds.attrs else ""))
     return ds, rows

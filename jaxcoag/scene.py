@@ -13,11 +13,11 @@ engines evaluate::
     K(m1, m2); K.matrix(m); K.relative_velocity2(m1, m2)
 
 Only the named effects are traced (an effect that is absent costs nothing), the components
-are added in quadrature and one safe square root is taken of the total (spec/velocities.md §6,
-§8.1).
+are added in quadrature and one safe square root is taken of the total (velocity hazard 1
+in docs/design_notes.md).
 
 References: Ormel (2008) thesis §4.3 (eq. 4.26, quadrature sum), eq. 5.5 (focusing);
-spec/velocities.md §6, §8.
+velocity hazards in docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -67,6 +67,10 @@ class Scene(eqx.Module):
             enlargement factor psi: a = a* psi^(1/3), A = pi a^2, tau_f from (m, psi); thesis
             eqs. 2.4, 2.6, 2.25). The kernel then has ``n_struct = 1`` and takes ``x``.
         name: label recorded in outputs.
+        drag_convention: "ormel" (default: Epstein law with the isothermal sound speed c_g and
+            l_mfp = 1/(n sigma_mol), thesis eqs. 2.4, 4.5) or "dustpy" (mean thermal speed
+            sqrt(8/pi) c_g and 1/(sqrt(2) n sigma_mol); Birnstiel et al. 2010, DustPy): the same
+            grain has a 1.596x larger Epstein St with "ormel" (:mod:`jaxcoag.physics.drag`).
     """
 
     velocities: tuple = ()
@@ -75,6 +79,7 @@ class Scene(eqx.Module):
     outcome: Any = None
     porosity: Any = eqx.field(default=None, converter=lambda p: _porosity_model(p))
     name: str = eqx.field(static=True, default="custom")
+    drag_convention: str = eqx.field(static=True, default="ormel")
 
     def __check_init__(self):
         if not isinstance(self.velocities, tuple) or len(self.velocities) == 0:
@@ -98,6 +103,10 @@ class Scene(eqx.Module):
             )
         if self.drag_regime not in _DRAG_REGIMES:
             raise JaxcoagInputError(f"unknown drag_regime {self.drag_regime!r}; use one of {_DRAG_REGIMES}")
+        if self.drag_convention not in _drag.DRAG_CONVENTIONS:
+            raise JaxcoagInputError(f"unknown drag_convention {self.drag_convention!r}; use one of "
+                                    f"{_drag.DRAG_CONVENTIONS} ('ormel': Epstein with c_g, thesis eq. 4.5; "
+                                    "'dustpy': with sqrt(8/pi) c_g and a mean free path 1/(sqrt(2) n sigma))")
         if self.porosity is not None and not isinstance(self.porosity, _eff.AbstractPorosity):
             raise JaxcoagTypeError(
                 f"Scene(porosity=...) must be None (compact spheres), 'psi' or a "
@@ -116,7 +125,7 @@ class Scene(eqx.Module):
             rho_s: material (bulk) density of compact particles [g cm^-3]; or pass
                 ``material`` (any object with a ``rho_s`` attribute).
             dv_floor: velocity floor [cm/s] added in quadrature (only needed with focusing and
-                no Brownian term; spec §8.6). Default 0.
+                no Brownian term; velocity hazard 6). Default 0.
         """
         if not isinstance(gas, GasState):
             raise JaxcoagTypeError("Scene.kernel(gas, ...): gas must be a jaxcoag GasState "
@@ -173,7 +182,8 @@ class SceneKernel(AbstractKernel):
                 raise JaxcoagTypeError(f"structural parameters x need a trailing axis of length >= {por.n_struct} "
                                 f"(x[..., 0] = psi); got shape {x.shape}")
             a, area = por.radius_area(m, x, self.rho_s)
-        tau = _drag._friction_time(m, a, self.gas, area=area, regime=self.scene.drag_regime)
+        tau = _drag._friction_time(m, a, self.gas, area=area, regime=self.scene.drag_regime,
+                                   convention=self.scene.drag_convention)
         return _eff.Particles(m=m, a=a, area=area, tau_f=tau, st=tau / self.gas.t_L)
 
     def _caches(self, p):

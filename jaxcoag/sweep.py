@@ -51,7 +51,7 @@ the full dataset; write it from process 0 only
 A longer guide with the fitting and output steps: ``docs/workflows.md``.
 
 References: JAX docs "Distributed arrays and automatic parallelization", "Manual parallelism
-with shard_map", "Multi-host and multi-process environments"; DESIGN.md §2 (failures are
+with shard_map", "Multi-host and multi-process environments"; docs/design_notes.md, house style (failures are
 values).
 """
 
@@ -227,9 +227,33 @@ def _compiled(fn, names, chunk, mesh, ncols):
     return jax.jit(fsh), meta
 
 
-def _run(fn, names, cols, chunk, mesh):
+def _run_blocks(fn, names, cols, chunk, progress):
+    """Unsharded evaluation block by block (``chunk`` members per compiled call, the last block
+    padded by repeating its last member) with a tqdm bar over the members on stderr."""
+    from tqdm.auto import tqdm
+
+    n = cols[0].shape[0]
+    block = n if chunk is None else min(chunk, n)
+    prog, meta = _compiled(fn, tuple(names), block, None, len(cols))
+    parts = []
+    desc = progress if isinstance(progress, str) else "sweep"
+    with tqdm(total=n, desc=desc, unit="member", dynamic_ncols=True) as bar:
+        for i in range(0, n, block):
+            c = [x[i:i + block] for x in cols]
+            k = c[0].shape[0]
+            if k < block:
+                c = [np.concatenate([x, np.repeat(x[-1:], block - k)]) for x in c]
+            out = prog(*[jnp.asarray(x) for x in c])
+            parts.append({key: np.asarray(v)[:k] for key, v in out.items()})
+            bar.update(k)
+    return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}, meta
+
+
+def _run(fn, names, cols, chunk, mesh, progress=False):
     """Evaluate fn over flat columns (tuple of (N,) arrays); returns (dict of (N, ...) numpy, meta)."""
     n = cols[0].shape[0]
+    if progress and mesh is None:
+        return _run_blocks(fn, names, cols, chunk, progress)
     prog, meta = _compiled(fn, tuple(names), chunk, mesh, len(cols))
     if mesh is None:
         out = prog(*[jnp.asarray(c) for c in cols])
@@ -243,7 +267,8 @@ def _run(fn, names, cols, chunk, mesh):
     return {k: _gather(v)[:n] for k, v in out.items()}, meta
 
 
-def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attrs=None, invalid="raise"):
+def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attrs=None, invalid="raise",
+          progress=False):
     """Evaluate ``fn(**point)`` over a parameter grid in one vmapped (optionally sharded) program.
 
     Arguments:
@@ -266,6 +291,11 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
             Physically impossible but finite values (e.g. alpha < 0) are refused by the
             model's own checks inside ``fn``; under vmap such a check raises for the whole
             batch, so filter them out of ``params`` first.
+        progress: False (default) or True / a description string: show a tqdm bar over the
+            members on stderr. The members are then run from Python in blocks of ``chunk``
+            (one compiled vmapped program per block, the last block padded) so that the bar
+            advances after each block; without ``chunk`` there is one block. Ignored when
+            sharded (``mesh``/``devices``), where all members run in one program.
 
     Returns:
         xarray.Dataset with the parameters as coordinates, the outputs as variables (extra
@@ -273,7 +303,7 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         ``status`` (int32 RESULTS code, 0 = successful; attrs ``flag_values``/``flag_meanings``)
         and attrs ``n_members``, ``n_failed``.
 
-    References: JAX ``vmap``, ``lax.map``, ``shard_map``; DESIGN.md §2 ("failures are values").
+    References: JAX ``vmap``, ``lax.map``, ``shard_map``; docs/design_notes.md, house style ("failures are values").
     """
     require_x64("jaxcoag.sweep.sweep")
     import xarray as xr
@@ -307,7 +337,7 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         hash(fn)
     except TypeError as e:
         raise JaxcoagInputError("fn must be hashable (a function or a hashable callable object).") from e
-    out, meta = _run(fn, names, cols, chunk, mesh)
+    out, meta = _run(fn, names, cols, chunk, mesh, progress)
     if bad.any():
         from .binned import RESULTS
         for k, v in out.items():
@@ -349,7 +379,8 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         units = {"mass_per_bin": "g cm-3", "number_per_bin": "cm-3", "gel_mass": "g cm-3", "mass_drift": "1",
                  "steps": "1"}
         if np.all(t == t[:1]):
-            coords["time"] = ("time", t[0], {"units": "s", "long_name": "time"})
+            from .io import time_coords
+            coords.update(time_coords(t[0]))  # time [s] and t_yr [yr]
         else:
             data["t"] = (pdims + ("time",), t.reshape(shape + t.shape[1:]), {"units": "s", "long_name": "output times"})
         g = meta["grid"]

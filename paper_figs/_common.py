@@ -18,7 +18,11 @@ Usage in a script ``paper_figs/figN_M_name.py``::
 
 ``--quick`` selects coarse grids (the test suite runs every script this way), ``--out DIR`` sets the
 output folder (default ``paper_figs/out/``). ``result()`` returns ``{"png": path, "checks": {name:
-{"computed", "reference", "rel_diff", "tol", "ok"}}, "all_ok": bool}`` for the tests.
+{"computed", "reference", "rel_diff", "tol", "ok", "counts"}}, "all_ok": bool}`` for the tests.
+
+A check that touches no simulation (published numbers against each other, a property of the chosen
+parameters) is added with ``counts=False``: it is printed and returned, marked "info", but it does
+not count toward ``all_ok`` - a script passes on what it computed, not on what it was given.
 """
 
 from __future__ import annotations
@@ -86,7 +90,8 @@ class Checks:
         self.title = title
         self.rows: dict[str, dict] = {}
 
-    def add(self, name: str, computed, reference, tol: float = 1e-6, *, absolute: bool = False):
+    def add(self, name: str, computed, reference, tol: float = 1e-6, *, absolute: bool = False,
+            counts: bool = True):
         """Record a check point.
 
         Arguments:
@@ -94,12 +99,14 @@ class Checks:
             computed, reference: numbers.
             tol: tolerance on the relative difference (or the absolute one if ``absolute``).
             absolute: compare |computed - reference| instead of the relative difference.
+            counts: False for a check that involves no simulation output (e.g. published table
+                rows against each other): reported, but not part of :attr:`all_ok`.
         """
         c, r = float(computed), float(reference)
         diff = c - r if absolute or r == 0 else (c - r) / abs(r)
         ok = bool(math.isfinite(c) and abs(diff) <= tol)
         self.rows[name] = dict(computed=c, reference=r, rel_diff=diff, tol=float(tol), ok=ok,
-                               absolute=bool(absolute or r == 0))
+                               absolute=bool(absolute or r == 0), counts=bool(counts))
         return c
 
     def print(self):
@@ -109,12 +116,14 @@ class Checks:
         print(f"{'check':<{w}}  {'computed':>14}  {'reference':>14}  {'diff':>10}  {'tol':>8}  ok")
         for k, v in self.rows.items():
             kind = "abs" if v["absolute"] else "rel"
+            info = "" if v["counts"] else ", info: not counted"
             print(f"{k:<{w}}  {v['computed']:>14.7g}  {v['reference']:>14.7g}  {v['rel_diff']:>10.2e}  "
-                  f"{v['tol']:>8.1e}  {'ok' if v['ok'] else 'FAIL'} ({kind})")
+                  f"{v['tol']:>8.1e}  {'ok' if v['ok'] else 'FAIL'} ({kind}{info})")
 
     @property
     def all_ok(self) -> bool:
-        return all(v["ok"] for v in self.rows.values())
+        """True when every counted check passed (``counts=False`` rows are informational)."""
+        return all(v["ok"] for v in self.rows.values() if v["counts"])
 
     def result(self, png, **extra) -> dict:
         """Dictionary returned by a script's ``main``: png path, checks, all_ok (+ extra entries)."""

@@ -2,14 +2,14 @@
 
 Ungrouped species DSMC (``mode="const_n"``, ``grouping=None``) from a monodisperse start, Table-5.1
 units (m0 = n0 = rho_d = 1). Plotted: m^2 f(m) in factor-2 bins (ensemble mean; run-to-run band)
-against the Smoluchowski solution n_k = f^2 (1-f)^(k-1), f = 1/(1+t/2) (spec/montecarlo.md §4.2),
+against the Smoluchowski solution n_k = f^2 (1-f)^(k-1), f = 1/(1+t/2) (Smoluchowski 1916),
 and the "one particle per bin" line m/V.
-Check points (spec §4.7 F2.8): at every output time the ensemble mean of ln(M0/M0^A) and
+Check points (thesis Fig. 2.8): at every output time the ensemble mean of ln(M0/M0^A) and
 ln(m_p/m_p^A) (m_p = M2/M1; M0^A = 1/(1+t/2), m_p^A = 1+t) are within a statistical tolerance
-4 sqrt((1 + ln GF)/(Np R)) (Smith-Matsoukas error grows like ln GF; capped below by the spec's 0.05
+4 sqrt((1 + ln GF)/(Np R)) (Smith-Matsoukas error grows like ln GF; capped below by 0.05
 at the full size), and the run-mean mass-distribution error E_mass (total variation over factor-2
-bins, spec §5.1) is <= 1.5x the noise floor of Np number-weighted draws from the exact n_k for GF <= 100
-(spec proposal) and <= 2x beyond: the constant-N duplication error grows ~ ln GF (Smith & Matsoukas 1998);
+bins, docs/design_notes.md) is <= 1.5x the noise floor of Np number-weighted draws from the exact n_k for GF <= 100
+([own] tolerance) and <= 2x beyond: the constant-N duplication error grows ~ ln GF (Smith & Matsoukas 1998);
 measured with the quick size (Np = 1000, 4 runs): 0.65 (t = 1), 1.16 (t = 1e2), 1.55 (t = 1e4).
 
 Run:   python paper_figs/fig2_8_constN_constant.py --quick      (Np = 1000, 4 runs, t <= 1e4; ~30 s
@@ -35,7 +35,7 @@ def _extra(p):
 
 
 def noise_floor(n_bin, rho_bin, n_draw, rng, n_rep=200):
-    """E_mass of n_draw number-weighted particle draws from the exact distribution (spec §5.1).
+    """E_mass of n_draw number-weighted particle draws from the exact distribution (noise floor, docs/design_notes.md).
 
     Counts per factor-2 bin are multinomial with the exact number fractions; each drawn particle
     carries the bin's exact mean mass (within-bin mass scatter neglected).
@@ -52,7 +52,7 @@ def noise_floor(n_bin, rho_bin, n_draw, rng, n_rep=200):
 
 
 def tv_error(rho_sim, rho_a):
-    """Total-variation mass-distribution error (spec §5.1) of one run (last axis = bins)."""
+    """Total-variation mass-distribution error E_mass (docs/design_notes.md) of one run (last axis = bins)."""
     import numpy as np
 
     p = rho_sim / rho_sim.sum(axis=-1, keepdims=True)

@@ -5,8 +5,8 @@
 (b) ``mode="const_ns"``, ungrouped, ``controller="species"``: duplications (2 per event while
     Ns < Ns*) keep the number of *species* near Ns*; Np then grows (thesis 2e4 -> > 1e6) and the run
     follows the Golovin solution much longer, at a higher cost (freeze-down).
-Output t = 1, 10, 20, 30 (Table-5.1 units) vs the Golovin solution (spec/montecarlo.md §4.3).
-Check points (spec §4.7 F2.9a/b): E_mass(b) < E_mass(a) at t = 20 and 30 (run means); (a) at t = 30 obeys the
+Output t = 1, 10, 20, 30 (Table-5.1 units) vs the Golovin (1963) solution.
+Check points (thesis Fig. 2.9a/b): E_mass(b) < E_mass(a) at t = 20 and 30 (run means); (a) at t = 30 obeys the
 deterministic bound M_tot,sim < e^{30}; (b) ends with Np > initial Np (growth factor printed) and
 |ln(m_p/e^t)| of (b) at t = 20 is smaller than that of (a).
 

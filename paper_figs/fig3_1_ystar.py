@@ -2,7 +2,7 @@
 
 Horizontal lines: RHS = 0 (St -> 0, root y_a = 1.6) and RHS = -1/2 (St = 1, root y* = 1), plus the RHS
 of eq. 3.21 for a few (St, beta/alpha) showing that a larger beta/alpha raises y* (§3.3.3).
-Check points (spec/velocities.md §9 #1, #2, #4, #5): y_a, F(0), F(1), min F', y*(St), eq. 3.22.
+Check points (eq. 3.18d; independent float64 values): y_a, F(0), F(1), min F', y*(St), eq. 3.22.
 Run: python paper_figs/fig3_1_ystar.py [--quick] [--out DIR]
 """
 

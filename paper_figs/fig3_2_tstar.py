@@ -2,7 +2,7 @@
 
 Dashed: exact root of eq. 3.18d; solid: t* = 1.6 tau_f; dotted: Cuzzi & Hogan 2003 k*/k_L = 1 + St^-3/2/2
 (St* = (k*/k_L)^-2/3). t* <= t_L is enforced (Re = 1e30, so the lower clip is invisible).
-Check points (spec §11, §9 #3, #7): St = 0.3 values 0.4302 / 0.48 / 0.3940, CH03 St*(1) = 0.763143,
+Check points (thesis §3.3.2, App. 3.A; independent float64 values): St = 0.3 values 0.4302 / 0.48 / 0.3940, CH03 St*(1) = 0.763143,
 CH03 St*/St -> 1.587401, exact St*(1) = 1, ya reaches 1 at St = 0.625.
 Run: python paper_figs/fig3_2_tstar.py [--quick] [--out DIR]
 """

@@ -3,7 +3,7 @@
 Solid: t_1 >> t_2 (St_2 = 0, clamped to 1e-30); dashed: identical particles (zero for St_1 < 6.25e-5,
 omitted on the log axis). Dotted: limits eq. 3.24 (Re^1/4 St_1, St_1 < r), eq. 3.25 (sqrt(2.969 St_1),
 sqrt(1.969 St_1), r < St_1 < 1) and eq. 3.26 (sqrt(1 + 1/(1+St_1)), sqrt(2/(1+St_1)), St_1 > 1).
-Check points: spec/velocities.md §10.2 and the peak of check #23 (1.226468 at St_1 = 0.964145;
+Check points: independent float64 values of eqs. 3.14/3.15 and the peak (1.226468 at St_1 = 0.964145;
 identical 1.009725 at 0.915010) -- the curves peak slightly below St_1 = 1.
 Run: python paper_figs/fig3_3_dv.py [--quick] [--out DIR]
 """
@@ -14,7 +14,7 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _common  # noqa: E402
 
-FIG33 = [  # St1, identical, St2 -> 0 (spec §10.2)
+FIG33 = [  # St1, identical, St2 -> 0 (independent float64 reference values)
     (1e-6, 0.0, 9.949869e-5), (1e-5, 0.0, 9.534101e-4), (1e-4, 9.847625e-3, 1.212294e-2),
     (1e-3, 4.416624e-2, 5.346727e-2), (1e-2, 1.399818e-1, 1.714552e-1), (0.1, 4.325908e-1, 5.272040e-1),
     (0.3, 7.119773e-1, 8.588253e-1), (1, 1.000000, 1.224704), (3, 7.071068e-1, 1.117989),

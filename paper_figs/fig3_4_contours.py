@@ -3,7 +3,7 @@
 Panels: (a) the Markiewicz et al. 1991 numerics are not reproducible from closed forms; it is replaced
 by the App. 3.A ``accurate=True`` variant (exact y*, Re = 1e8) and labelled so. (b) t* = 1.6 tau_f with
 Re -> inf (Re = 1e30); (c) exact y*, Re = 1e8; (d) CH03 k*, Re = 1e8. Levels {1, 3} x 10^i, 0.8, 1.15.
-Check points (spec §11, §9 #23): maxima along the St_2 -> 0 edge at Re = 1e8: exact 1.2265 at St_1 = 0.964,
+Check points (independent float64 values of eqs. 3.14/3.15): maxima along the St_2 -> 0 edge at Re = 1e8: exact 1.2265 at St_1 = 0.964,
 ya 1.2709 at 0.625, ch03 1.1059 at 1.84; the 2-D maximum lies on that edge; Delta v = 0 on the diagonal
 for St < 6.25e-5 (Re = 1e8).
 Run: python paper_figs/fig3_4_contours.py [--quick] [--out DIR]

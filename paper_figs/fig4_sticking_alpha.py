@@ -10,13 +10,13 @@ cross-section (rim mass ∝ a^2 [CHOICE]: sweep-up of the same dust by every cho
 so the total rim mass equals the total chondrule mass (R_cd = 1). For each pair of chondrule-size
 nodes the relative velocity comes from the scene kernel (compact chondrule radii), the impact
 parameter is averaged uniformly over the cross-section, and the O08 rule (stick if
-f_comp <= F_av with the lens-area f_geo, spec/collisions.md §5) decides; pairs are weighted by
+f_comp <= F_av with the lens-area f_geo, thesis eqs. 4.16-4.18 and erratum 10) decides; pairs are weighted by
 K_ij n_i n_j.
 
-Published (thesis §4.4, spec §11.2): sticking fraction <~ 50 % at alpha = 1e-4 and nearly 100 % at
+Published (thesis §4.4, Tab. 4.5): sticking fraction <~ 50 % at alpha = 1e-4 and nearly 100 % at
 alpha = 1e-6, with larger final compounds (T-Tab4.5 <a>_m: 0.7-0.8 cm at alpha <= 1e-6 vs 0.1 cm
-at alpha >= 1e-4 for rho_X = 1). Exact checks: the f_comp coefficient 0.036744 (spec §10 M6) and
-the §5 example (equal 1 g compounds stick at 50 cm/s, f_comp = 0.22965; bounce at 55 cm/s).
+at alpha >= 1e-4 for rho_X = 1). Exact checks: the f_comp coefficient 0.036744 (thesis eq. 4.16:
+"3.7e-2") and the O08 example (equal 1 g compounds stick at 50 cm/s, f_comp = 0.22965; bounce at 55 cm/s).
 
 Measured (--quick): 0.72 at 1e-6, 0.03 at 1e-4, 0.00 at 1e-2 (full: 0.74, 0.73, 0.59, 0.03, 0, 0
 for alpha = 1e-7 .. 1e-2). Where it differs and why: this is the first-generation fraction of a

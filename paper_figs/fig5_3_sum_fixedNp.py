@@ -1,14 +1,15 @@
 """Thesis Fig. 5.3: sum kernel K = (m_i+m_j)/2 with a fixed number of particles (negative control).
 
 Ungrouped constant-N DSMC (``mode="const_n"``, ``grouping=None``), monodisperse start, Table-5.1 units,
-output t = 1, 10, 20, 30, against the Golovin solution (spec/montecarlo.md §4.3: M0 = e^{-t/2},
+output t = 1, 10, 20, 30, against the Golovin (1963) solution (M0 = e^{-t/2},
 m_p = M2/M1 = e^t). The method is fine for t < 10, lags at t = 20 and fails at t = 30: the total
 simulated mass M_tot,sim = Np <m>_sim ~ Np e^{15} lies below the analytic peak mass e^{30}
 (one-particle line crossed at t ~ 2 ln Np), so m_p <= M_tot,sim < e^{30} deterministically.
-Check points (spec §4.7 F2.9a/F5.3): t = 1 passes the F2.8 tolerances (ensemble-mean ln M0 and ln m_p
+Check points (thesis Figs. 2.9a, 5.3): t = 1 passes the F2.8 tolerances (ensemble-mean ln M0 and ln m_p
 within 4 sqrt((1+ln GF)/(Np R)), E_mass <= 1.5x noise floor); at t = 30 max over runs of
-M_tot,sim/e^{30} < 1 (deterministic bound) and the ensemble-mean ln(m_p/e^t) < -1 (failure shown);
-the crossing time 2 ln Np < 30.
+M_tot,sim/e^{30} < 1 (deterministic bound) and the ensemble-mean ln(m_p/e^t) < -1 (failure shown).
+The crossing time 2 ln Np < 30 is a property of the chosen Np, not of the simulation: it is printed
+as an info row and does not count toward the pass flag.
 
 Run:   python paper_figs/fig5_3_sum_fixedNp.py --quick   (Np = 1000, 3 runs: ~1.5e4 events/run; ~60 s incl.
                                                           compile on 2 busy cores)
@@ -104,7 +105,8 @@ def main(argv=None):
         ax.loglog(mc_, rho_a * mc_ / dm, "-", color=c, lw=1.0)
         v = float(np.exp(np.asarray(res.logV)[:, it]).mean())
         ax.loglog(mc_, mc_ * mc_ / v / dm, ":", color=c, lw=0.8)
-    ck.add("one-particle-line crossing 2 ln Np (<30)", 2 * math.log(n_p), 0.0, 30.0, absolute=True)
+    # a property of the chosen Np (no simulation involved): reported, not counted
+    ck.add("one-particle-line crossing 2 ln Np (<30)", 2 * math.log(n_p), 0.0, 30.0, absolute=True, counts=False)
     ax.set_ylim(1e-7, 2.0)
     ax.set_xlabel("m")
     ax.set_ylabel(r"$m^2 f(m)$")

@@ -8,12 +8,12 @@
     lagged far more: ln(m_p/e^t) = -0.86 at t = 5, -2.31 at t = 10.)
 (b) constant-V, distribution zoom with 20 bins (``mode="const_v", grouping="distribution"``), N = 1e100,
     Ng* = 1e4, f_eps = 1e-4: mass *and* number density are resolved over the whole range.
-Reference: Golovin solution (spec/montecarlo.md §4.3: m_p = M2/M1 = e^t, M0 = e^{-t/2}).
-Check points (spec §4.7 F5.4a/b; tolerances from the group counts):
+Reference: Golovin (1963) solution (m_p = M2/M1 = e^t, M0 = e^{-t/2}).
+Check points (thesis Fig. 5.4a/b; tolerances from the group counts):
   (a) on bins with rho^A >= 1e-2 max rho^A: ensemble-mean |ln(m_p/e^t)| < 0.1 at every time (thesis size;
-      with the small quick Ns* a resolution lag of m_p is expected (spec [proto]: M2/e^t ~ 0.55-0.8 at
+      with the small quick Ns* a resolution lag of m_p is expected (our prototype: M2/e^t ~ 0.55-0.8 at
       Ns* = 200-800); measured here with Ns* = 300, f_eps = 1e-3: ln(m_p/e^t) = -0.24..-0.54 at t = 5 and
-      -0.54..-0.96 at t = 10, with Ns reaching the capacity 8 Ns* by t = 15 (demagnification cascade, spec
+      -0.54..-0.96 at t = 10, with Ns reaching the capacity 8 Ns* by t = 15 (demagnification cascade, MC
       hazard 3; the engine has no ``leftover="stochastic"`` option), so the quick tolerance is 1.0), and the
       run-mean E_mass <= 1.5 (quick: 4; measured 1.73 at t = 5 and 3.12 at t = 10 -- the m_p lag is a bias that
       the perfect-sampler floor does not contain, and Ng counts the many light leftover groups) x the
@@ -51,7 +51,7 @@ def _extra(p):
 
 
 def floor_mass(rho_a, ng):
-    """Noise floor of E_mass for ng mass-weighted draws (spec §5.1, perfect-sampler formula)."""
+    """Noise floor of E_mass for ng mass-weighted draws (docs/design_notes.md, perfect-sampler formula)."""
     import numpy as np
 
     p = rho_a / rho_a.sum()

@@ -1,17 +1,17 @@
 """Thesis Fig. 5.5: product kernel K = m_i m_j, constant-V equal-mass grouping, N = 1e20, m* = N/Ns*.
 
 Output t = 0.4, 0.7, 0.95, 1.0, 1.05, 1.3, 2.0 (Table-5.1 units; gel point t = 1) against the Flory /
-Trubnikov sol distribution n_k = k^{k-2} t^{k-1} e^{-kt}/k! (spec/montecarlo.md §4.4; valid for the sol after
+Trubnikov sol distribution n_k = k^{k-2} t^{k-1} e^{-kt}/k! (Trubnikov 1971; Ernst, Ziff & Hendriks 1984; valid for the sol after
 t = 1). The runaway (gel) body of mass ~ beta(t) N is excluded from the sol comparison: sol := particles
 with m < 10 N^{2/3}.
-Check points (spec §4.7 F5.5): at t = 0.4, 0.7 the ensemble-mean |ln(M2/M2^A)| < 0.1 (M2^A = 1/(1-t)); at
+Check points (thesis Fig. 5.5): at t = 0.4, 0.7 the ensemble-mean |ln(M2/M2^A)| < 0.1 (M2^A = 1/(1-t)); at
 t = 1.3, 2.0 the gel mass fraction (m >= 10 N^{2/3}) is within 0.05 + 3 sqrt(beta(1-beta)/(Ns* R)) of beta(t)
 (beta = 0.42297, 0.79681; the second term is the granularity of swallowing ~Ns* groups whole: 0.003 at the
 thesis size, 0.10/0.085 in quick mode, where 0.478 and 0.872 were measured);
 at t = 0.4, 0.7, 1.3, 2.0 the sol E_mass (factor-2 bins, normalised over the sol) is <= 1.5 (quick: 2.5) x
-the noise floor (2 pi Ng)^{-1/2} sum sqrt(p(1-p)) of Ng mass-weighted draws (spec §5.1).
+the noise floor (2 pi Ng)^{-1/2} sum sqrt(p(1-p)) of Ng mass-weighted draws (docs/design_notes.md).
 
-Leftover rule: ``leftover="stochastic"`` (spec §6 hazard 3) by default. With the thesis' demagnify rule
+Leftover rule: ``leftover="stochastic"`` (MC hazard 3 in docs/design_notes.md) by default. With the thesis' demagnify rule
 (``--leftover demagnify``) the post-gel accretion of j-group chunks by the gel (N_eps splitting) starts a
 demagnification cascade: measured (quick size) Ng = 1.3e8 groups and > 1.1e5 events between t = 1.05 and
 1.3, CAPACITY flag, event cap hit before t = 1.3 (gel fraction stuck at 0.30 vs beta(1.3) = 0.42).
@@ -104,7 +104,7 @@ def main(argv=None):
             ck.add(f"sol E_mass/E_floor t={t:g} (<={tol_e:g})", e.mean() / fl, 0.0, tol_e, absolute=True)
         if t in (1.3, 2.0):
             # granularity of the gel fraction: ~Ns* groups of mass m* are swallowed whole ->
-            # s.d. sqrt(beta (1-beta)/(Ns* R)); tolerance 0.05 (spec) + 3 s.d. (negligible at thesis size)
+            # s.d. sqrt(beta (1-beta)/(Ns* R)); tolerance 0.05 [own] + 3 s.d. (negligible at thesis size)
             sd = math.sqrt(beta * (1 - beta) / (ns * runs))
             ck.add(f"gel fraction t={t:g}", gel.mean(), beta, 0.05 + 3 * sd, absolute=True)
         print(line)

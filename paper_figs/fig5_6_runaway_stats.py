@@ -2,15 +2,15 @@
 
 Two zoom methods: distribution (``grouping="distribution"``, Ng* = 1e3 in the thesis) and equal-mass
 (m* = N/Ns*). M_L1 = largest particle mass; M_L2 = second-largest *particle* (= M_L1 when the largest species
-has g >= 2), spec §0; the species variant (mass of the second-heaviest species) is also printed.
-Expected (thesis §5.3.2, spec §4.7 F5.6): with the distribution method M_L2 ~ M_L1 until M_L1 ~ N^{2/3}
+has g >= 2; docs/design_notes.md); the species variant (mass of the second-heaviest species) is also printed.
+Expected (thesis §5.3.2, Fig. 5.6): with the distribution method M_L2 ~ M_L1 until M_L1 ~ N^{2/3}
 (= 2.2e13, Tanaka & Nakazawa 1994), then they separate; with equal-mass M_L1 and M_L2 diverge early because
 the "runaway" is just a collapsing group.
 Check points (distribution method, medians over runs at each output time):
   median M_L2/M_L1 > 0.1 at all times with median M_L1 < 0.01 N^{2/3};
   M_L2/M_L1 < 0.01 in every run at every (real) time with M_L1 > 100 N^{2/3};
   subcritical median M_L1 within a factor 2 of the random-graph estimate (ln N - 2.5 ln ln N)/I(t),
-  I(t) = t - 1 - ln t (spec §4.4: t = 0.5 -> 189, t = 0.9 -> 6.8e3) -- quick mode (Ng* = 100) only asserts
+  I(t) = t - 1 - ln t (random-graph asymptotics: t = 0.5 -> 189, t = 0.9 -> 6.8e3) -- quick mode (Ng* = 100) only asserts
   [estimate/20, 2 estimate]: it gives 23 and 1.1e3 (the extreme tail is under-resolved by 100 groups).
   Snapshots after the event cap (post-gel accretion) are excluded.
   Equal-mass (species variant): at the first time the heaviest species exceeds 100 N^{2/3}, the second
@@ -55,7 +55,7 @@ def largest_two(res):
 
 
 def ml1_random_graph(t, n=N):
-    """Subcritical largest-cluster estimate (ln N - 2.5 ln ln N)/I(t), I = t - 1 - ln t (spec §4.4)."""
+    """Subcritical largest-cluster estimate (ln N - 2.5 ln ln N)/I(t), I = t - 1 - ln t (random-graph asymptotics)."""
     return (math.log(n) - 2.5 * math.log(math.log(n))) / (t - 1.0 - math.log(t))
 
 

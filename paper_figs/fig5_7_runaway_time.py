@@ -2,14 +2,14 @@
 
 Constant-V, distribution zoom (``grouping="distribution"``), monodisperse start, Table-5.1 units (K00 = 1).
 t_R = first time with M_L1/M_L2 >= 1e4 (M_L2 = second-largest *particle*), or the time a single particle is
-left (spec §4.7 F5.7, §6.12): ``mc.run(..., stop=mc.Runaway(1e4))`` stops each run there and t_R is
+left (thesis §5.3.3; MC hazard 12 in docs/design_notes.md): ``mc.run(..., stop=mc.Runaway(1e4))`` stops each run there and t_R is
 ``result.t_stop``. The runs of each N are vmapped in one call.
 
 Expected: t_R decreases with N; local slopes d ln t_R / d ln ln N tend to 1 - nu (Malyshkin & Goodman 2001,
 eq. 5.19 t_R ~ (ln N)^{1-nu}).
 
 References plotted and checked:
-* exact ungrouped-DSMC anchors of spec §4.7 at N <= 1e5 (nu = 2: 0.268, 0.194, 0.143, 0.1198 at N = 300,
+* exact ungrouped-DSMC anchors (our independent species-formalism runs, 40 each) at N <= 1e5 (nu = 2: 0.268, 0.194, 0.143, 0.1198 at N = 300,
   1e3, 1e4, 1e5; nu = 3: 0.0817, 0.0553, 0.0358, 0.0247): agreement within 3 combined s.e. + 5 %
   (+ 5 % more for f_eps = 1e-2);
 * ``jaxcoag.analytic.runaway_time_chain`` (semi-analytic, saddlepoint): the first explosion among the
@@ -18,8 +18,10 @@ References plotted and checked:
   large (1.3-1.8x the exact DSMC at N = 1e4-1e5) and asymptotically exact (~2^nu t_R: 5 % / 2.7 % at
   nu = 2, N = 1e80 / 1e160; < 0.2 % at nu = 3): checked within 5 % + 3 s.e. at N >= 1e80, as a bound (MC/chain in [0.6, 1.03]) at 1e10-1e20;
 * t_R strictly decreasing over the N grid, and on a grid reaching 1e80 the last local slope within 15 %
-  of 1 - nu [own]. The spec's "last slope < first slope" is printed, not asserted: the exact anchors
-  give a first slope (300 -> 1e5) of -1.15 for nu = 2, already below the asymptote -1.
+  of 1 - nu [own] and steeper than the first local slope of that grid (the "last slope < first slope"
+  reading of Fig. 5.7, a counted check). Only on grids reaching 1e80: at small N the exact anchors
+  themselves fall faster than the asymptote (first slope 300 -> 1e5 of -1.15 for nu = 2, below -1), so
+  on the quick grid (N <= 1e20) the inequality is not a property of the true t_R and is not checked.
 
 Resolution (why the options below). The thesis zoom alone (log-mass bins of width >= ln 2, Ng* groups)
 moves whole species of the steep seed tail (counts falling by e^{nu-1} per unit mass up to k ~ ln N)
@@ -40,7 +42,7 @@ with a test run; plot in docs/fig5_7_runaway_time.png), t_R mean and MC/chain ra
   nu = 3: N = 300 0.0754 | 1e5 0.0225 (DSMC 0.0247) | 1e10 0.00970 (1.01) | 1e20 0.00266 (0.97) |
           1e80 1.977e-4 (1.013) | 1e160 5.065e-5 (1.009); events per run up to 2.1e5.
   Local slopes: nu = 2: -0.87, -0.68, -0.84, -0.88, -0.94; nu = 3: -1.72, -1.21, -1.87, -1.87, -1.96
-  (so here also last slope < first slope, as the spec says, by 0.07 and 0.24).
+  (so here also last slope < first slope, as Fig. 5.7 suggests, by 0.07 and 0.24).
 
 Parameters: thesis Ng* = 6e4 (nu=2), 3e5 (nu=3), f_eps = 1e-3, 100 -> 10 runs. Here Ng* = 2000,
 count_groups = 10, tail_events = 64, tail_wmax = 1e9, capacity = 1024, f_eps = 1e-3, 4 runs (fewer runs
@@ -60,7 +62,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _common  # noqa: E402
 from fig5_3_sum_fixedNp import in_range  # noqa: E402
 
-ANCHORS = {  # spec §4.7 F5.7: exact ungrouped DSMC, 40 runs, mean and s.e.
+ANCHORS = {  # exact ungrouped DSMC (independent runs), 40 runs, mean and s.e.
     2: {300: (0.268, 0.006), 1e3: (0.194, 0.004), 1e4: (0.143, 0.002), 1e5: (0.1198, 0.0013)},
     3: {300: (0.0817, 0.0044), 1e3: (0.0553, 0.0021), 1e4: (0.0358, 0.0010), 1e5: (0.0247, 0.0006)},
 }
@@ -89,7 +91,7 @@ def _extra(p):
 
 
 def t_estimate(n, nu):
-    """Merger-model order of magnitude t_R ~ (ln N)^{1-nu}/(nu-1) (spec §4.7; prefactor unreliable)."""
+    """Merger-model order of magnitude t_R ~ (ln N)^{1-nu}/(nu-1) (Malyshkin & Goodman 2001; prefactor unreliable)."""
     return math.log(n) ** (1.0 - nu) / (nu - 1.0)
 
 
@@ -191,11 +193,14 @@ def main(argv=None):
             in_range(ck, f"nu={nu}: max step ln t_R(N_k+1)/t_R(N_k) (<0: decreasing)", float(np.max(np.diff(lt))),
                      -50.0, 0.0)
         if r["N"][-1] >= 1e80 and len(r["N"]) > 1:
-            # spec §4.7 asks "last slope < first slope"; the exact anchors themselves give a first slope
-            # (300 -> 1e5) of -1.15 (nu=2) below the asymptote -1, so the asymptote is approached from
-            # above and that inequality is not asserted (printed only); instead the last slope must be
-            # within 15 % [own tolerance] of 1 - nu (the chain model gives -0.993 / -1.958).
-            print(f"  last slope - first slope = {slopes[-1] - slopes[0]:.3f} (spec: < 0; see docstring)")
+            # Fig. 5.7: on a grid reaching the asymptotic regime the local slope steepens towards 1 - nu,
+            # "last slope < first slope" (measured on the thesis grid: by 0.07 (nu = 2) and 0.24 (nu = 3),
+            # see the docstring), and the last slope is within 15 % [own tolerance] of 1 - nu (the chain
+            # model gives -0.993 / -1.958)
+            print(f"  last slope - first slope = {slopes[-1] - slopes[0]:.3f} (Fig. 5.7: < 0)")
+            if len(slopes) > 1:
+                in_range(ck, f"nu={nu}: last slope - first slope (<0, Fig. 5.7)", float(slopes[-1] - slopes[0]),
+                         -float(nu), 0.0)
             in_range(ck, f"nu={nu}: last slope (N>=1e80) in (1-nu) x [0.85, 1.15]", float(slopes[-1]),
                      1.15 * (1 - nu), 0.85 * (1 - nu))
         for i, n in enumerate(r["N"]):

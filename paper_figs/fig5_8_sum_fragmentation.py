@@ -2,7 +2,7 @@
 
 Constant-Ns, equal-mass zoom (m* = m_p, mass duplication controller), one long run with ~100 snapshots;
 every product heavier than m_frag is shattered into monomers (``jaxcoag.mc.CatastrophicFragmentation``,
-thesis §5.3.4); ``leftover="stochastic"`` (spec §6 hazard 3) avoids the demagnify cascade that otherwise
+thesis §5.3.4); ``leftover="stochastic"`` (MC hazard 3 in docs/design_notes.md) avoids the demagnify cascade that otherwise
 fills the species capacity right after the first fragmentation.
 KNOWN ENGINE LIMITATION (measured 2026-11-21, m_frag = 1e6, Ns* = 100, f_eps = 1e-2): after the first
 fragmentation (t ~ 8) the event rate per unit time explodes (~700 events per 0.4 time units at t ~ 9,
@@ -12,7 +12,7 @@ t = 2.4 t_first (t_first = ln(m_frag)/2) and averages over the second half of th
 only rejects NONFINITE / ZERO_RATE / MAX_EVENTS (CAPACITY is printed). The time-averaged m^2 f(m) over the steady state is a "bathtub": mass piles up at both ends
 (two-state model: n_0 m_0 ~ n_f m_f), and the simulated volume stabilises (thesis: V ~ 2e12 >> m_frag for
 m_frag = 1e10, Ns* = 1e4).
-Check points (spec §4.7 F5.8, factor-2 bins, time average over the second half of the run):
+Check points (thesis Fig. 5.8, factor-2 bins, time average over the second half of the run):
   mass in the lowest 2 bins (m < 4) / max mass in any single mid-range bin (centre in
   [m_frag^0.3, m_frag^0.7]) > 1; the same for the 2 bins just below m_frag; the ratio of the two end masses
   within a factor 3 (|ln ratio| < ln 3); volume stationary: |ln(<V> last quarter / <V> third quarter)| < ln 2.

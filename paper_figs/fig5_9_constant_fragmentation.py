@@ -7,10 +7,10 @@ kernel mass exponent beta = 0, i.e. m^2 f ~ m^{1/2} (Camacho 2001, thesis eqs. 5
 under-resolved by the equal-mass method (episodic injection of ~m_frag worth of monomers); the thesis fixes it
 with a follow-up low-m simulation (m < m_cut = 1e5) driven by the measured injection/removal rates -- the
 engine has no injection/removal source terms, so that panel (b) is NOT reproduced here (gap, printed).
-Check point (spec §4.7 F5.9): least-squares slope of log10(time-averaged m^2 f) vs log10 m over
+Check point (thesis Fig. 5.9; Camacho 2001): least-squares slope of log10(time-averaged m^2 f) vs log10 m over
 1e4 <= m <= 1e9 (quick, m_frag = 1e6: 1e2 <= m <= 1e5, the same two-decade margin below m_frag scaled down)
 is 0.5 +- 0.1 (quick: +- 0.2: one short run, fewer groups).
-``leftover="stochastic"`` (spec §6 hazard 3) as in Fig. 5.8.
+``leftover="stochastic"`` (MC hazard 3) as in Fig. 5.8.
 Measured (quick, m_frag = 1e6, Ns* = 100, f_eps = 1e-2): 4.4e4 events, all 100 snapshots, slope 0.534.
 
 Run:   python paper_figs/fig5_9_constant_fragmentation.py --quick  (m_frag = 1e6, Ns* = 100, f_eps = 1e-2; ~1-2 min)

@@ -4,7 +4,7 @@ What runs: ``jaxcoag.scenes.setup("ch6_cloud", n=..., material=...)`` -- a homog
 (T = 10 K, R_gd = 100, a0 = 0.1 um monomers, Brownian + OC07 turbulence with v_L = c_g,
 t_L = L_J/c_g) -- solved with the two-bin engine for COMPACT particles (psi = 1) and the O09
 collision recipe consumed through the shared Outcome interface (jaxcoag.binned.outcome). The O09
-recipe runs on the SURROGATE tables (spec/collisions.md §6.5: only T-Tab6.7/6.9 are printed; the
+recipe runs on the SURROGATE tables (the thesis prints only Tabs. 6.7/6.9; the
 CDS set J/A+A/502/845 is not available here), with smooth regime switches (width 0.3 e-folds).
 For n = 1e5 ice the same core is also run with perfect sticking (no fragmentation).
 

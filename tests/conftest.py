@@ -1,4 +1,4 @@
-"""Strict test configuration (house style, DESIGN.md §3): float64 and no silent rank promotion."""
+"""Strict test configuration (house style, docs/design_notes.md): float64 and no silent rank promotion."""
 
 import os
 

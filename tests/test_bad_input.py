@@ -88,7 +88,9 @@ def test_solve_binned_kernel_nan_leaf_under_jit_raises_not_nan():
     """A NaN parameter that only appears at run time (traced) raises with the parameter's name."""
     f = jax.jit(lambda b: solve_binned(kernels.Sum(b), G, N0, TS).mass_per_bin)
     assert bool(jnp.all(jnp.isfinite(f(1e-3))))
-    with pytest.raises(Exception, match="`b` must be finite and > 0"):
+    # eqx.error_if under jax.jit surfaces as the runtime error of the compiled program: jax raises a
+    # ValueError from the cached (fast-path) executable, a JaxRuntimeError on a first dispatch
+    with pytest.raises((ValueError, jax.errors.JaxRuntimeError), match="`b` must be finite and > 0"):
         jax.block_until_ready(f(NAN))
 
 
@@ -423,3 +425,324 @@ def test_incompatible_kernel_error_is_also_a_type_error():
         solve_binned(kernels.Sum(1.0), G, N0, TS, fragmentation=Shattering(100.0))
     with pytest.raises(JaxcoagInputError, match="Scene"):
         steady_state(K, G, N0, fragmentation=Shattering(100.0), y_guess=np.ones(G.nbins + 1))
+
+
+# ------------------------------------------------------------------------------ refused before the work
+# Issue 12 point 3: every refusal is a one-line message saying what to change, exit code 2 from the
+# CLI, no traceback, no file written, and it happens before the computation.
+import os  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+from jaxcoag import checkpoint as ckmod, cli, config, runner  # noqa: E402
+from jaxcoag.binned.scheme import check_memory, estimate_bytes  # noqa: E402
+
+SMALL_TOML = """
+[run]
+name = "small_growth"
+[gas]
+model = "mmsn_hayashi81"
+R_au = 1.0
+alpha = 1e-3
+[dust]
+rho_s = 1.6
+a0 = 1e-4
+[grid]
+m_max = 1e-6
+bins_per_decade = 2
+[solver]
+rtol = 1e-4
+[time]
+t_end_yr = 10.0
+n_out = 3
+"""
+
+
+def _files(root):
+    """Every file and directory below root (relative paths), to prove that nothing was written."""
+    out = set()
+    for d, dirs, files in os.walk(root):
+        for n in dirs + files:
+            out.add(os.path.relpath(os.path.join(d, n), root))
+    return out
+
+
+@pytest.fixture
+def no_compute(monkeypatch):
+    """Make any segment integration fail loudly: a refusal must come before the computation."""
+    def boom(*a, **k):
+        raise AssertionError("the run started computing before refusing")
+
+    monkeypatch.setattr(ckmod, "integrate", boom)
+
+
+def _refused(capsys, argv, *words):
+    """cli.main(argv) -> exit 2, one stderr line holding every word, no traceback; returns it."""
+    rc = cli.main(argv)
+    cap = capsys.readouterr()
+    assert rc == 2, (rc, cap.err)
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in cap.err, cap.err
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]
+
+
+def test_grid_too_large_refused_before_any_allocation(tmp_path, capsys, no_compute):
+    """bins_per_decade = 1e6 on the default 1 AU grid (6.7e-12..1e8 g, 19.17 decades) means
+    1.917e7 bins: the two-bin pair tensors alone would be ~1.8e14 pairs; refused in well under a
+    second by the size estimate (nothing is allocated), naming the key to change."""
+    before = _files(tmp_path)
+    t0 = time.perf_counter()
+    msg = _refused(capsys, ["run", "--set", "grid.bins_per_decade=1e6", "--out", str(tmp_path / "o" / "run.nc")],
+                   "19173792 bins", "lower [grid] bins_per_decade (now 1e+06)")
+    assert time.perf_counter() - t0 < 3.0, msg
+    assert _files(tmp_path) == before
+    # absurd grids are refused on the grid arrays themselves (before the scheme estimate)
+    _refused(capsys, ["run", "--set", "grid.bins_per_decade=1e13", "--out", str(tmp_path / "o" / "run.nc")],
+             "for the grid alone", "lower [grid] bins_per_decade")
+    assert _files(tmp_path) == before
+
+
+def test_grid_too_large_refused_in_a_fresh_process_without_a_traceback(tmp_path):
+    """The same refusal from a real `jaxcoag run` process: exit 2, exactly one stderr line, and
+    the process never grew beyond ~1 GiB (a bare import takes ~0.3 GiB; the run asked for ~3e14 GiB)."""
+    code = ("import resource, sys; from jaxcoag import cli; rc = cli.main(sys.argv[1:]); "
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); sys.exit(rc)")
+    r = subprocess.run([sys.executable, "-c", code, "run", "--no-progress", "--set", "grid.bins_per_decade=1e6",
+                        "--out", str(tmp_path / "o" / "run.nc")], capture_output=True, text=True, timeout=300,
+                       cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("jaxcoag run: error: 19173792 bins would need"), r.stderr
+    assert int(r.stdout.split()[-1]) < 1024 * 1024  # ru_maxrss [KiB] < 1 GiB
+    assert os.listdir(tmp_path) == []
+
+
+def test_memory_estimate_limit_and_suggested_bins(monkeypatch):
+    """With JAXCOAG_MEMORY_LIMIT_GB the limit is exactly that; the refusal names the largest bin count
+    that fits (estimate(n) <= limit < estimate(n + 1)); the estimate grows as N^2 (explicit) and
+    N^3 (implicit solver: the dense Jacobian carries every pair tensor for N + 1 tangents)."""
+    import re
+
+    e = [estimate_bytes("twobin", n) for n in (1000, 2000)]
+    assert e[1] / e[0] == pytest.approx((2000 * 2001) / (1000 * 1001))
+    ei = [estimate_bytes("twobin", n, fragmentation=True, implicit=True) for n in (1000, 2000)]
+    assert 7.5 < ei[1] / ei[0] < 8.1
+    assert estimate_bytes("dg", 300, order=2) > estimate_bytes("dg", 300, order=1) > estimate_bytes("twobin", 300)
+    monkeypatch.setenv("JAXCOAG_MEMORY_LIMIT_GB", "1")
+    assert check_memory("twobin", 135, fragmentation=True, implicit=True) < 2 ** 30  # the default run fits
+    with pytest.raises(JaxcoagInputError, match=r"more than the limit of 1 GiB") as ei_:
+        check_memory("twobin", 400, fragmentation=True, implicit=True, fix="lower [grid] bins_per_decade")
+    n = int(re.search(r"at most ~(\d+) bins fit", str(ei_.value)).group(1))
+    lim = 2.0 ** 30
+    assert estimate_bytes("twobin", n, fragmentation=True, implicit=True) <= lim
+    assert estimate_bytes("twobin", n + 1, fragmentation=True, implicit=True) > lim
+    monkeypatch.setenv("JAXCOAG_MEMORY_LIMIT_GB", "-3")
+    _raises(lambda: check_memory("twobin", 10), "JAXCOAG_MEMORY_LIMIT_GB must be a number of GiB > 0")
+
+
+def test_grid_too_large_python_api_refused_fast(monkeypatch):
+    """solve_binned / steady_state / MassGrid refuse an oversized grid up front (no compile, no tensors)."""
+    monkeypatch.setenv("JAXCOAG_MEMORY_LIMIT_GB", "0.5")
+    g = MassGrid.log(1.0, 1e4, 1000)  # 4000 bins: ~3.7 GiB of two-bin pair tensors (explicit)
+    t0 = time.perf_counter()
+    _raises(lambda: solve_binned(K, g, monodisperse(g, 1.5, 1.0), TS), "use a coarser grid")
+    _raises(lambda: steady_state(K, g, monodisperse(g, 1.5, 1.0), fragmentation=ShatterToMonomers(10.0),
+                                 t_relax=1.0), "use a coarser grid")
+    _raises(lambda: MassGrid.log(1.0, 1e4, 1e8), "whose grid arrays alone need")
+    assert time.perf_counter() - t0 < 3.0
+
+
+@pytest.mark.parametrize("how", ["out_under_a_file", "out_under_a_file_no_checkpoint", "checkpoint_under_a_file",
+                                 "out_is_a_directory"])
+def test_unwritable_output_refused_before_computing(tmp_path, capsys, no_compute, how):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(SMALL_TOML)
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a directory")
+    good = str(tmp_path / "res" / "run.nc")
+    argv, words = {
+        "out_under_a_file": (["--out", str(blocker / "run.nc")], ("netCDF output", "is a file", "change --out")),
+        "out_under_a_file_no_checkpoint": (["--out", str(blocker / "run.nc"), "--no-checkpoint"],
+                                           ("netCDF output", "is a file", "change --out")),
+        "checkpoint_under_a_file": (["--out", good, "--checkpoint", str(blocker / "c.npz")],
+                                    ("checkpoint", "is a file", "change --checkpoint")),
+        "out_is_a_directory": (["--out", str(tmp_path), "--no-checkpoint"], ("--out must name a netCDF file",)),
+    }[how]
+    before = _files(tmp_path)
+    _refused(capsys, ["run", str(cfg), "--no-progress"] + argv, *words)
+    assert _files(tmp_path) == before  # no result, no checkpoint, no directory, no probe file left
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root may write into a 0555 directory")
+def test_read_only_directory_refused(tmp_path, capsys, no_compute):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(SMALL_TOML)
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        _refused(capsys, ["run", str(cfg), "--no-checkpoint", "--out", str(ro / "run.nc")], "cannot write", "--out")
+        _refused(capsys, ["run", str(cfg), "--no-checkpoint", "--out", str(ro / "sub" / "run.nc")], "not writable")
+        assert os.listdir(ro) == []
+    finally:
+        ro.chmod(0o755)
+
+
+def _good_checkpoint(tmp_path, name="ck.npz", **over):
+    """A valid binned checkpoint of SMALL_TOML at segment 0 (written with save_checkpoint, no solve)."""
+    cfg = config.loads(SMALL_TOML)
+    b = config.build(cfg)
+    y0 = np.asarray(b.scheme.init(b.grid, jnp.asarray(b.n0)))
+    kw = dict(config_hash=cfg.physics_hash(), ts=b.ts, ys=y0[None, :], steps=[], rejected=[], wall_s=[])
+    kw.update(over)
+    path = tmp_path / name
+    ckmod.save_checkpoint(path, **kw)
+    return cfg, b, path
+
+
+@pytest.mark.parametrize("kind", ["truncated", "random_bytes", "other_configuration", "nan_state", "empty_file",
+                                  "foreign_npz"])
+def test_bad_checkpoint_refused_naming_the_file(tmp_path, capsys, no_compute, kind):
+    cfg, b, good = _good_checkpoint(tmp_path, "good.npz")
+    # the valid one is accepted (numbers as written)
+    ck = ckmod.load_checkpoint(good, config_hash=cfg.physics_hash(), ts=b.ts, ny=b.grid.nbins + 1)
+    assert ck["ys"].shape == (1, b.grid.nbins + 1) and ck["steps"].size == 0
+    np.testing.assert_allclose(ck["ys"][0].sum(), 0.01 * float(b.gas.rho_g), rtol=1e-12)
+    bad = tmp_path / "bad.npz"
+    raw = good.read_bytes()
+    if kind == "truncated":
+        bad.write_bytes(raw[: len(raw) // 2])
+        words = ("is truncated or not a jaxcoag checkpoint", "delete it")
+    elif kind == "random_bytes":
+        bad.write_bytes(np.random.default_rng(12).bytes(4096))
+        words = ("is truncated or not a jaxcoag checkpoint", "delete it")
+    elif kind == "empty_file":
+        bad.write_bytes(b"")
+        words = ("is truncated or not a jaxcoag checkpoint", "delete it")
+    elif kind == "foreign_npz":
+        np.savez(bad, a=np.arange(3))
+        words = ("is not a jaxcoag-binned-checkpoint", "delete it")
+    elif kind == "other_configuration":
+        other = cfg.replace(**{"gas.alpha": 1e-4})
+        _good_checkpoint(tmp_path, "bad.npz", config_hash=other.physics_hash())
+        words = ("different run configuration", "without --resume")
+    else:
+        ys = np.asarray(ck["ys"]).copy()
+        ys[0, 0] = np.nan
+        _good_checkpoint(tmp_path, "bad.npz", ys=ys)
+        words = ("NaN", "delete it")
+    with pytest.raises(JaxcoagInputError, match="bad.npz") as e:
+        ckmod.load_checkpoint(bad, config_hash=cfg.physics_hash(), ts=b.ts, ny=b.grid.nbins + 1)
+    for w in words:
+        assert w in str(e.value), str(e.value)
+    content = bad.read_bytes()
+    path = _write_small(tmp_path)
+    before = _files(tmp_path)
+    msg = _refused(capsys, ["run", path, "--no-progress", "--resume", "--checkpoint", str(bad),
+                            "--out", str(tmp_path / "o" / "run.nc")], str(bad), *words)
+    assert msg.startswith("jaxcoag run: error:")
+    assert _files(tmp_path) == before and bad.read_bytes() == content  # nothing written, checkpoint untouched
+
+
+def _write_small(tmp_path):
+    p = tmp_path / "s.toml"
+    if not p.exists():
+        p.write_text(SMALL_TOML)
+    return str(p)
+
+
+def test_save_false_writes_nothing(tmp_path, monkeypatch):
+    """runner.run(save=False): no checkpoint, no netCDF, no figure, no directory; with resume=True a
+    checkpoint is read (the run continues from it) but left byte for byte as it was."""
+    monkeypatch.chdir(tmp_path)
+    cfg = config.loads(SMALL_TOML)
+    out = tmp_path / "sub" / "run.nc"
+    res = runner.run(cfg, out=out, save=False, progress=False, verbose=False, figure=True)
+    assert _files(tmp_path) == set()
+    assert res.finished and res.path is None and res.figure is None and res.checkpoint is None
+    rho = np.asarray(res.solution.mass_per_bin)
+    assert rho.shape == (4, 11) and np.max(np.abs(np.asarray(res.solution.mass_drift))) < 1e-12
+    # the same config with a checkpoint of 1 of 3 segments: resume reads it, writes nothing
+    part = runner.run(cfg, out=out, progress=False, verbose=False, figure=False, max_segments=1)
+    ck = tmp_path / "sub" / "run.nc.ckpt.npz"
+    assert not part.finished and ck.exists() and not out.exists()
+    raw, listing = ck.read_bytes(), _files(tmp_path)
+    res2 = runner.run(cfg, out=out, save=False, resume=True, progress=False, verbose=False)
+    assert res2.resumed_from == 1 and res2.finished
+    assert ck.read_bytes() == raw and _files(tmp_path) == listing
+    np.testing.assert_array_equal(np.asarray(res2.solution.mass_per_bin), rho)
+
+
+# ------------------------------------------------------------------------------ Monte Carlo checkpoints / capacity
+def test_mc_bad_checkpoint_refused_naming_the_file(tmp_path):
+    from jaxcoag import mc
+
+    # the configuration of test_mc_capacity_exhaustion_is_reported_not_silent (one compilation)
+    kw = dict(n_particles=2, capacity=24, dedupe=False, key=jax.random.key(4), progress=False, every=4)
+    t_out = jnp.array([0.0, 0.5, 2.0, 50.0])
+    good = tmp_path / "mc.npz"
+    res = mc.run_checkpointed(K, t_out=t_out, checkpoint=good, **kw)
+    ck = mc.load_checkpoint(good)
+    # two monomers coalesce once (P(no event by t = 50) = e^-25): one particle of mass 2 remains
+    assert ck["n_done"] == 4 and int(ck["state"].n_events) == int(res.n_events) == 1
+    np.testing.assert_allclose(float(np.sum(np.asarray(ck["state"].w) * np.asarray(ck["state"].m))), 2.0)
+    raw = good.read_bytes()
+    d = dict(np.load(good))
+    d["state_w"] = d["state_w"].copy()
+    d["state_w"][0] = np.nan
+    cases = {"truncated": (raw[: len(raw) // 3], "is truncated or not a jaxcoag.mc checkpoint"),
+             "random": (np.random.default_rng(3).bytes(2048), "is truncated or not a jaxcoag.mc checkpoint"),
+             "empty": (b"", "is truncated or not a jaxcoag.mc checkpoint")}
+    for name, (content, words) in cases.items():
+        p = tmp_path / f"{name}.npz"
+        p.write_bytes(content)
+        with pytest.raises(JaxcoagInputError, match=f"{name}.npz") as e:
+            mc.load_checkpoint(p)
+        assert words in str(e.value) and "delete it or use resume=False" in str(e.value)
+        # run_checkpointed(resume=True) refuses it before running and leaves it as it was
+        with pytest.raises(JaxcoagInputError, match=f"{name}.npz"):
+            mc.run_checkpointed(K, t_out=t_out, checkpoint=p, resume=True, **kw)
+        assert p.read_bytes() == content
+    nanp = tmp_path / "nan.npz"
+    np.savez(nanp, **d)
+    _raises(lambda: mc.load_checkpoint(nanp), r"holds NaN in \['state_w'\]")
+    np.savez(tmp_path / "foreign.npz", a=np.arange(3))
+    _raises(lambda: mc.load_checkpoint(tmp_path / "foreign.npz"), "is not a jaxcoag.mc checkpoint")
+    # another configuration: refused by the argument fingerprint
+    _raises(lambda: mc.run_checkpointed(K, t_out=t_out, checkpoint=good, resume=True,
+                                        **dict(kw, n_particles=3)), "different arguments")
+
+
+def test_mc_capacity_below_the_target_refused():
+    """A grouped run merges species above ~0.9 S, so S must hold ns_target species: distribution
+    Ng* = 50 needs S >= 56 (floor(0.9 * 55) = 49 < 50 <= floor(0.9 * 56)); equal-mass Ns* = 16
+    needs S >= 20 (S = 19: min(floor(17.1), 19 - 1 - 3) = 15 < 16)."""
+    from jaxcoag import mc
+
+    assert mc.min_capacity("distribution", 50) == 56 and mc.min_capacity("equal_mass", 16) == 20
+    assert mc.min_capacity(None, 1000) is None
+    base = dict(n_particles=1e6, t_out=[0.5], key=jax.random.key(0))
+    _raises(lambda: mc.run(K, grouping="distribution", ns_target=50, capacity=55, **base),
+            r"capacity = 55 species slots cannot hold ns_target = 50 distribution species.*capacity >= 56")
+    _raises(lambda: mc.run(K, grouping="equal_mass", ns_target=16, capacity=19, **base),
+            r"cannot hold ns_target = 16 equal_mass species.*capacity >= 20")
+
+
+def test_mc_capacity_exhaustion_is_reported_not_silent():
+    """Ns > S (300 monomers, no grouping, 24 slots): the emergency merge lowers the resolution, so the
+    run says so with a CapacityWarning (and STATUS.CAPACITY); a run that fits says nothing."""
+    import warnings
+
+    from jaxcoag import mc
+
+    kw = dict(capacity=24, dedupe=False, t_out=jnp.array([0.0, 0.5, 2.0, 50.0]))
+    with pytest.warns(mc.CapacityWarning, match=r"ran out of species slots \(capacity = 24\).*capacity=48"):
+        res = mc.run(K, n_particles=300, key=jax.random.key(3), **kw)
+    assert int(res.status) & mc.STATUS.CAPACITY
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", mc.CapacityWarning)
+        ok = mc.run(K, n_particles=2, key=jax.random.key(4), **kw)
+    assert int(ok.status) == mc.STATUS.ZERO_RATE

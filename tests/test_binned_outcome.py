@@ -1,10 +1,10 @@
-"""The shared physics Outcome consumed by the binned engine (spec/collisions.md §9.2).
+"""The shared physics Outcome consumed by the binned engine (Birnstiel, Dullemond & Brauer 2010, eq. 15).
 
 Checks: per-pair mass balance and rhs conservation to round-off for O07 (DT thresholds),
 O09 (surrogate tables) and v_frag shattering; exact equivalence with the engine's own
 Shattering / ShatterToMonomers for matching outcomes; the no-fragmentation Outcome reproduces
 the two-bin coagulation tensors (merged forms: no cancellation for tiny projectiles); the
-spec §6.6 fragment bin integrals; a solve that conserves mass; and the end-to-end gradient
+thesis eq. 6.29-6.30 fragment bin integrals; a solve that conserves mass; and the end-to-end gradient
 d ln<m>/d ln(gamma) through solve_binned with a smooth outcome vs central finite differences.
 """
 
@@ -145,7 +145,7 @@ def test_place_remnant_two_bin_split():
 
 @pytest.mark.parametrize("q,expect", [(-1.3, 0.08590), (-1.5, 0.14599), (-2.0, 0.41702), (-3.7, 0.98013)])
 def test_fragment_bin_integrals_spec_table(q, expect):
-    """spec §6.6: mass fraction in [1, 10] of dn/dm ∝ m^q on [1, 250]."""
+    """Thesis eqs. 6.29-6.30 integrated: mass fraction in [1, 10] of dn/dm ∝ m^q on [1, 250]."""
     le = jnp.log(jnp.array([0.1, 1.0, 10.0, 100.0, 1000.0]))
     W = fragment_weights(le, jnp.asarray(q), jnp.asarray(1.0), jnp.asarray(250.0))
     np.testing.assert_allclose(float(W[1]), expect, rtol=2e-4)

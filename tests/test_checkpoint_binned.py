@@ -41,7 +41,7 @@ def cfg():
 @pytest.fixture(scope="module")
 def full(cfg, tmp_path_factory):
     d = tmp_path_factory.mktemp("full")
-    return runner.run(cfg, out=str(d / "run.nc"), progress=False, verbose=False, save=False)
+    return runner.run(cfg, out=str(d / "run.nc"), progress=False, verbose=False, figure=False)
 
 
 def test_uninterrupted_run_reaches_fragmentation_equilibrium(full):
@@ -59,10 +59,10 @@ def test_uninterrupted_run_reaches_fragmentation_equilibrium(full):
 
 def test_resume_after_stop_equals_uninterrupted_bitwise(cfg, full, tmp_path):
     out = str(tmp_path / "run.nc")
-    part = runner.run(cfg, out=out, progress=False, verbose=False, save=False, max_segments=2)
+    part = runner.run(cfg, out=out, progress=False, verbose=False, figure=False, max_segments=2)
     assert not part.finished and part.solution.ys.shape[0] == 3
     np.testing.assert_array_equal(np.asarray(part.solution.ys), np.asarray(full.solution.ys)[:3])
-    res = runner.run(cfg, out=out, progress=False, verbose=False, save=False, resume=True)
+    res = runner.run(cfg, out=out, progress=False, verbose=False, figure=False, resume=True)
     assert res.finished and res.resumed_from == 2
     np.testing.assert_array_equal(np.asarray(res.solution.ys), np.asarray(full.solution.ys))
     np.testing.assert_array_equal(np.asarray(res.solution.mass_per_bin), np.asarray(full.solution.mass_per_bin))
@@ -100,7 +100,7 @@ def test_mismatched_or_broken_checkpoint_is_refused(cfg, full, tmp_path):
         checkpoint.load_checkpoint(full.checkpoint, config_hash=moved.physics_hash())
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a checkpoint")
-    with pytest.raises(JaxcoagInputError, match="not a readable jaxcoag checkpoint"):
+    with pytest.raises(JaxcoagInputError, match="is truncated or not a jaxcoag checkpoint"):
         checkpoint.load_checkpoint(bad)
     with pytest.raises(JaxcoagInputError, match="no checkpoint file"):
         checkpoint.load_checkpoint(tmp_path / "missing.npz")

@@ -26,7 +26,7 @@ def test_demo_quick_numbers_and_outputs(tmp_path, capsys):
     np.testing.assert_allclose(rows[1]["dv_brownian"], dv_bm, rtol=1e-10)
     assert rows[1]["dv_turbulence"] == 0.0 and rows[1]["dv_radial"] == 0.0
     np.testing.assert_allclose(rows[1]["kernel"], np.pi * (2 * a) ** 2 * dv_bm, rtol=1e-10)
-    # spec/velocities.md #32 at T = 162 K gives 9.5209e-2; the ch4 3 AU temperature is 161.66 K
+    # thesis eqs. 2.1/4.4 at T = 162 K (rho_s = 3, a = 1 um) give 9.5209e-2; the ch4 3 AU temperature is 161.66 K
     np.testing.assert_allclose(rows[1]["dv_brownian"], 9.5209e-2 * np.sqrt(float(gas.T) / 162.0), rtol=1e-4)
     # the Stokes numbers are St = rho_s a / (c_g rho_g) Omega in the Epstein regime
     st0 = rho_s * rows[0]["a_cm"] / (float(gas.c_g) * float(gas.rho_g)) * float(gas.Omega)

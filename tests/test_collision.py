@@ -1,4 +1,4 @@
-"""Cross-sections, gravitational focusing and the sigma*dv kernel (spec/velocities.md §6, §8; check #33)."""
+"""Cross-sections, gravitational focusing and the sigma*dv kernel (thesis eq. 5.5, eqs. 1.6/1.7; velocity hazard 6)."""
 
 import math
 

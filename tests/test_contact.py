@@ -1,4 +1,5 @@
-"""Contact physics and material presets: spec/collisions.md §2 and spec/particles.md B1/B9."""
+"""Contact physics and material presets: Wada et al. (2007) eqs. 1-6, 22, 44-48, Tabs. 2-3 and
+Ormel (2008) thesis eqs. 1.27-1.31, 2.10, 4.12-4.14, 6.18-6.20, Tabs. 2.1, 4.3."""
 
 import equinox as eqx
 import jax
@@ -23,9 +24,9 @@ def _pair_numbers(M):
     )
 
 
-# spec/collisions.md §2.4 table (Wada quartz / ice, r1 = 0.1 um, xi = 2 A).
-# E_break uses the exact JKR constant 1.542585 F_c delta_c (particles.md B1); collisions.md's
-# table value 1.5901e-11 / 6.1123e-10 is 1.54 F_c delta_c (Wada's rounding), 0.17 % lower.
+# Wada et al. (2007) Tab. 2 materials (quartz / ice, r1 = 0.1 um, xi = 2 A), evaluated independently.
+# E_break uses the exact JKR constant 1.542585 F_c delta_c (from Wada eq. 6); the rounded
+# value 1.5901e-11 / 6.1123e-10 is 1.54 F_c delta_c (Wada's rounding), 0.17 % lower.
 WADA = {
     "quartz": dict(E_star=2.7804e11, r_contact=3.9908e-7, delta0=1.0618e-8, delta_c=8.7646e-9,
                    F_c=1.1781e-3, Fcdc=1.0326e-11, m1=1.0891e-14, E_break=1.5928e-11, v0=30.79,
@@ -64,7 +65,7 @@ def test_jkr_constants_M2_M3():
     np.testing.assert_allclose(C.C_BREAK, 1.542585, rtol=1e-6)
     np.testing.assert_allclose(float(C.jkr_potential(6.0 ** (-2.0 / 3.0))), 4.0 / 45.0, rtol=1e-12)
     np.testing.assert_allclose(float(C.jkr_potential((2.0 / 3.0) ** (2.0 / 3.0))), -0.846614, rtol=1e-6)
-    # A_br prefactors: c * pi (9/16)^(1/3) (9 pi)^(2/3). Exact c_br gives 37.128; the spec's
+    # A_br prefactors: c * pi (9/16)^(1/3) (9 pi)^(2/3). Exact c_br gives 37.128;
     # 37.066 is the paper's rounded 1.54; Chokshi's 1.8 gives 43.324.
     unit = np.pi * (9 / 16) ** (1 / 3) * (9 * np.pi) ** (2 / 3)
     np.testing.assert_allclose(C.A_BR_WADA, 1.542585 * unit, rtol=1e-6)
@@ -108,7 +109,7 @@ def test_thesis_presets_M4_M7():
     np.testing.assert_allclose(float(s6.e_roll()), 1.4804e-9, rtol=1e-4)
     np.testing.assert_allclose(float(i6.e_break()), 4.1114e-7, rtol=1e-4)
     np.testing.assert_allclose(float(i6.e_roll()), 2.1911e-8, rtol=1e-4)
-    np.testing.assert_allclose(float(i6.e_break() / i6.m0), 3.7038e7, rtol=1e-4)  # spec: 3.70e7
+    np.testing.assert_allclose(float(i6.e_break() / i6.m0), 3.7038e7, rtol=1e-4)  # thesis §6.5.2 quotes ~1e7
 
 
 def test_threshold_velocities_M5_M6():

@@ -1,4 +1,4 @@
-"""Brownian and drift velocities (spec/velocities.md §3, §5; checks #31, #32)."""
+"""Brownian and drift velocities (thesis eqs. 1.23-1.25, 2.1, 4.4, 4.8, 4.22a, 4.28)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Monte Carlo API: custom initial states, statistics helpers (spec/montecarlo.md §0), the runaway
+"""Monte Carlo API: custom initial states, statistics helpers (M_L1, M_L2 of docs/design_notes.md), the runaway
 stop predicate, MCResult.to_xarray and the netCDF round trip."""
 
 import math

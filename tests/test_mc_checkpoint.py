@@ -1,5 +1,5 @@
 """Resumable Monte Carlo runs: resume_from and run_checkpointed equal one uninterrupted run bitwise
-(spec/montecarlo.md §3.8-§3.9; issue 6 "a resumed run equals an uninterrupted one")."""
+(snapshots and PRNG in docs/design_notes.md; issue 6 "a resumed run equals an uninterrupted one")."""
 
 import os
 

@@ -1,4 +1,5 @@
-"""Exact small-N statistics of the ungrouped species DSMC (spec/montecarlo.md §4.2-4.4, U1, U11).
+"""Exact small-N statistics of the ungrouped species DSMC (MC hazard 14 in docs/design_notes.md:
+master equation, binomial and random-graph targets).
 
 Ensembles of R runs are vmapped over keys (one compilation per kernel); every statistic is a
 z-score against the exact finite-N expectation of the Marcus-Lushnikov process, |z| < 4.
@@ -60,7 +61,7 @@ def _z(samples, expect):
 
 
 def _constant_kernel_exact(t_eval, n0=N0):
-    """Master equation of the pure death chain μ_n = α n(n-1)/2, α = K0/V (spec §4.2)."""
+    """Master equation of the pure death chain μ_n = α n(n-1)/2, α = K0/V (Kingman coalescent)."""
     alpha = 1.0 / n0
     n = np.arange(1, n0 + 1)
     mu = alpha * n * (n - 1) / 2
@@ -90,7 +91,7 @@ def test_constant_kernel_exact_finite_N(const_ensemble):
     res = jax.tree_util.tree_map(lambda x: x[3:], full)
     assert np.all(np.asarray(res.status) == 0)
     EN, Enk = _constant_kernel_exact(np.asarray(T_OUT)[1:])
-    # spec §4.2 reference values (N0 = 40, t = 1.5)
+    # reference values of the master equation (N0 = 40, t = 1.5; independent evaluation)
     assert EN[1] == pytest.approx(23.131, abs=1e-3) and Enk[1, 1] == pytest.approx(13.284, abs=1e-3)
     Nt = np.asarray(res.moments(0.0) * res.V)  # (R, T)
     np.testing.assert_allclose(Nt[:, 0], N0)
@@ -107,7 +108,8 @@ def test_constant_kernel_exact_finite_N(const_ensemble):
 @pytest.mark.slow
 @pytest.mark.parametrize("rates", ["incremental", "full"])
 def test_sum_kernel_binomial_N(rates):
-    """N(t) - 1 ~ Binomial(N0 - 1, e^{-t/2}) for K = (m_i+m_j)/2 (spec §4.3); both rate designs."""
+    """N(t) - 1 ~ Binomial(N0 - 1, e^{-t/2}) for K = (m_i+m_j)/2 (the total rate depends on n only); both
+    rate designs."""
     res = _ensemble(K.Sum(0.5), 21, rates=rates)
     Nt = np.asarray(res.moments(0.0) * res.V)
     for it, t in enumerate(np.asarray(T_OUT)):
@@ -126,7 +128,8 @@ def test_sum_kernel_binomial_N(rates):
 
 @pytest.mark.slow
 def test_product_kernel_n1_n2():
-    """E[n_1] = N0 e^{-(N0-1)t/N0}, E[n_2] = C(N0,2)(1-e^{-t/N0}) e^{-2(N0-2)t/N0} (spec §4.4)."""
+    """E[n_1] = N0 e^{-(N0-1)t/N0}, E[n_2] = C(N0,2)(1-e^{-t/N0}) e^{-2(N0-2)t/N0} (Erdős-Rényi
+    random-graph correspondence)."""
     res = _ensemble(K.Product(1.0), 31)
     cnt = _counts(res)
     for it, t in enumerate(np.asarray(T_OUT)):

@@ -1,7 +1,7 @@
-"""Grouped Monte Carlo vs the Smoluchowski solutions (spec/montecarlo.md §4.3-4.7, U1, U2).
+"""Grouped Monte Carlo vs the Smoluchowski solutions (Golovin 1963; thesis Figs. 5.3-5.7).
 
 Ensembles are vmapped over keys; tolerances come from the number of simulated groups
-(noise floor E_floor ≈ (2π Ng)^{-1/2} Σ_b sqrt(p_b (1 - p_b)), spec §5.1) and the
+(noise floor E_floor ≈ (2π Ng)^{-1/2} Σ_b sqrt(p_b (1 - p_b)), docs/design_notes.md) and the
 ensemble spread (z-scores), never from picking seeds.
 """
 
@@ -30,7 +30,7 @@ def _invariants(res):
 
 
 def _tv(rho_sim, rho_a):
-    """Total-variation mass-distribution error of spec §5.1 (∈ [0, 1])."""
+    """Total-variation mass-distribution error E_mass (∈ [0, 1]; docs/design_notes.md)."""
     return 0.5 * np.sum(np.abs(rho_sim / rho_sim.sum() - rho_a / rho_a.sum()))
 
 
@@ -67,14 +67,14 @@ def test_sum_kernel_equal_mass_moments(sum_equal_mass):
     assert np.all(np.asarray(res.status) == 0)
     _invariants(res)
     _check_moments(res, SUM_T, np.exp(-SUM_T / 2), np.exp(SUM_T), bias=0.05)
-    # U1: mass conserved to rounding (relative 1e-12, spec §4.8) in every snapshot
+    # mass conserved to rounding (relative 1e-12, MC hazard 9) in every snapshot
     mass = np.sum(np.asarray(res.g) * np.asarray(res.m), axis=-1)
     np.testing.assert_allclose(mass, 1e30, rtol=1e-12)
     np.testing.assert_allclose(np.asarray(res.moments(1.0)), 1.0, rtol=1e-12)
 
 
 def test_sum_kernel_equal_mass_mass_per_bin(sum_equal_mass):
-    """Ensemble-mean mass per factor-2 bin vs the Golovin solution (spec §4.6, §5.1)."""
+    """Ensemble-mean mass per factor-2 bin vs the Golovin (1963) solution (E_mass, docs/design_notes.md)."""
     res = sum_equal_mass
     edges = 2.0 ** np.arange(0, 41)
     rho = np.asarray(res.mass_per_bin(jnp.asarray(edges)))  # (R, T, nb)
@@ -121,14 +121,14 @@ def test_constant_kernel_const_n():
 @pytest.mark.slow
 def test_sum_kernel_const_ns_equal_mass():
     """Sum kernel, constant-Ns with the equal-mass zoom (m* = m_p) and the mass controller:
-    follows e^t well past the point where a fixed-N DSMC fails (spec F5.4a, CI-scale)."""
+    follows e^t well past the point where a fixed-N DSMC fails (thesis Fig. 5.4a, CI-scale)."""
     times = np.array([0.0, 5.0, 10.0])
     res = _ens(K.Sum(0.5), 404, 4, n_particles=200, t_out=jnp.asarray(times), mode="const_ns",
                grouping="equal_mass", ns_target=200, f_eps=1e-3, capacity=2048)
     assert np.all(np.asarray(res.status) == 0)
     _invariants(res)
     np.testing.assert_allclose(np.asarray(res.moments(1.0)), 1.0, rtol=1e-10)
-    # the proto-typed lag of m_p at small Ns* (spec F5.4a [proto]: M2/e^t ~ 0.55-0.8): allow 0.5
+    # the lag of m_p at small Ns* seen in our prototype (M2/e^t ~ 0.55-0.8): allow 0.5
     _check_moments(res, times, np.exp(-times / 2), np.exp(times), bias=0.5)
 
 
@@ -164,7 +164,7 @@ def test_incremental_and_full_rates_agree_grouped():
 
 @pytest.mark.slow
 def test_stochastic_leftover_limits_species_growth():
-    """leftover="stochastic" (spec §6 item 3): fewer species than the demagnify cascade, unbiased
+    """leftover="stochastic" (MC hazard 3): fewer species than the demagnify cascade, unbiased
     mass (the simulated mass fluctuates around the true value) and the same moments."""
     times = np.array([0.0, 5.0, 10.0])
     kw = dict(n_particles=1e30, t_out=jnp.asarray(times), grouping="equal_mass", ns_target=100, f_eps=1e-3)

@@ -1,5 +1,6 @@
-"""Spec unit tests U5 (first-event law), U6 (App. 5.A exactness: mean and variance of the consumed
-fraction) and U10 (snapshot semantics) of spec/montecarlo.md §4.8, through the public ``run``.
+"""Unit tests of the grouped MC through the public ``run``: the first-event law (Gillespie 1975),
+the App. 5.A exactness of Ormel & Spaans (2008) (mean and variance of the consumed fraction, eqs.
+5.28-5.30) and snapshot semantics (pre-event state, MC hazard 11 in docs/design_notes.md).
 
 Statistical tolerances follow from the sample size (z-scores < 4, chi-square / KS p-values > 1e-4);
 seeds are fixed only for reproducibility.
@@ -31,7 +32,7 @@ U5_B = 0.5  # K = 0.5 (m_a + m_b), V = 1
 
 
 def _expected_pair_rates():
-    """λ^G of every unordered pair from the spec formulas (5.7), (5.10), (5.12) with ceil, (5.31)."""
+    """λ^G of every unordered pair from Ormel & Spaans (2008) eqs. (5.7), (5.10), (5.12) with ceil, (5.31)."""
     n = len(U5_M)
     Kf = lambda a, b: U5_B * (U5_M[a] + U5_M[b])
     out = {}
@@ -100,7 +101,7 @@ def test_u5_first_event_law(n_draws):
 # ----------------------------------------------------------------------------- U6 App. 5.A
 
 class TaggedKernel(K.AbstractKernel):
-    """K = a0 V iff exactly one partner is tagged (psi > 0.5), else 0 (spec §4.8 U6)."""
+    """K = a0 V iff exactly one partner is tagged (psi > 0.5), else 0 (thesis App. 5.A test)."""
 
     a0V: jax.Array
     n_struct = 1
@@ -168,7 +169,7 @@ def test_u6_app5a_mean_and_variance(runs):
     """App. 5.A: with chunked (grouped) events the consumed fraction has mean 1 - e^{-a0 t} for any
     chunking and variance e^{-a0 t}(1 - e^{-a0 t})/W, W = w_P 2^{N_eps} (eqs. 5.28-5.30).
     (a) N_eps = 0, w_P = 32: whole groups, never demagnifies: variance at all times.
-    (b) N_eps = 3, w_P = 4: eighth groups, demagnifies once < 1 group is left. The spec asks for
+    (b) N_eps = 3, w_P = 4: eighth groups, demagnifies once < 1 group is left. A cautious test checks
         the variance at a0 t <= 0.5 only; it holds at all times here because a demagnification
         (z -> z - 1) lowers N_eps by one as well, so the chunk of 2^(z - N_eps) = 2^17
         projectiles and W are unchanged (measured: var 0.00699 vs 0.00727 at a0 t = 1,

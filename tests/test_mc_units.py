@@ -1,4 +1,4 @@
-"""Deterministic unit tests of the grouped Monte Carlo building blocks (spec/montecarlo.md §4.8)."""
+"""Deterministic unit tests of the grouped Monte Carlo building blocks (Ormel & Spaans 2008 = thesis ch. 5)."""
 
 import jax
 import jax.numpy as jnp
@@ -18,7 +18,7 @@ LN2 = np.log(2.0)
 
 
 @pytest.mark.parametrize("zi,mi,zj,mj,expect_ceil,expect_floor", [
-    (0, 1e6, 30, 1.0, 24, 23),   # spec §2.2 worked example: x = 23.36
+    (0, 1e6, 30, 1.0, 24, 23),   # eq. 5.12 worked example: x = 23.36
     (5, 10.0, 6, 1.0, 1, 1),     # x = 10.97 capped at z_j - z_i = 1
     (0, 1e10, 2, 1.0, 0, 0),     # x < 0 -> 0
     (7, 3.0, 7, 5.0, 0, 0),      # equal zooms -> 0
@@ -31,7 +31,7 @@ def test_n_eps_table(zi, mi, zj, mj, expect_ceil, expect_floor):
     args_sw = (jnp.int32(zj), jnp.int32(zi), jnp.log(mj), jnp.log(mi), jnp.log2(1e-4))
     assert int(n_eps(*args_sw, rounding="ceil")) == expect_ceil
     if (zi, zj) == (0, 30):
-        # Δm/m = n_c m_j / m_i = 2^(30-24)/1e6 = 6.4e-5 <= f_eps (spec example)
+        # Δm/m = n_c m_j / m_i = 2^(30-24)/1e6 = 6.4e-5 <= f_eps (eq. 5.11 example)
         assert 2.0 ** (30 - expect_ceil) * mj / mi == pytest.approx(6.4e-5)
 
 

@@ -1,4 +1,5 @@
-"""Collision outcomes: spec/collisions.md §3, §5, §6.6, §7, §8, §9 (checklist G3, M6, R7, R10, F3, W1, W2, S1)."""
+"""Collision outcomes: DT thresholds (thesis Tabs. 1.1, 6.1), O08 (thesis ch. 4), fragment draws (eqs. 6.29-6.30),
+Wada et al. (2007) laws (eqs. 51-59), the Outcome interface and smooth switches (docs/design_notes.md)."""
 
 import equinox as eqx
 import jax
@@ -117,7 +118,7 @@ def _sampler_means(n, seeds):
 
 @pytest.mark.slow
 def test_sampler_mean_rtol_1e2_slow():
-    """R10 at the spec's rtol 1e-2: 3e6 draws per seed, 4 SE = 0.6 % of the mean."""
+    """Fragment sampler (thesis eq. 6.29) mean at rtol 1e-2: 3e6 draws per seed, 4 SE = 0.6 % of the mean."""
     x, mean, se = _sampler_means(3_000_000, (0, 1, 2))
     assert 4 * se < 0.01 * mean
     for row in x:
@@ -207,7 +208,7 @@ def test_dt_thresholds_F3():
 
 
 def test_dt_threshold_velocities_wada_B10():
-    """Impact speeds v/v0 of the DT energies for N_tot = 256 (spec/particles.md B10 table)."""
+    """Impact speeds v/v0 of the DT energies for N_tot = 256 (Wada et al. 2007 §5.1, Tabs. 2-3; E_imp = N m1 v^2/8)."""
     N = 256.0
     for M, want in ((Material.wada_quartz(), (0.947, 2.12, 15.1)), (Material.wada_ice(), (0.305, 0.683, 4.87)),
                     (Material.wada_quartz(3e-7), (3.67, 8.20, 58.4)), (Material.wada_ice(3e-7), (1.18, 2.65, 18.9))):

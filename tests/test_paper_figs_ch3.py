@@ -1,7 +1,7 @@
 """Smoke-and-numbers test of the chapter-3 paper figures (thesis Figs 3.1-3.4) in --quick mode.
 
 Each script's ``main(["--quick", "--out", tmp])`` returns its check points (computed vs reference,
-spec/velocities.md §9-§11); all must be within tolerance and the PNG must exist.
+thesis ch. 3 and independent float64 values); all must be within tolerance and the PNG must exist.
 """
 
 import pathlib

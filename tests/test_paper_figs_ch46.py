@@ -1,7 +1,7 @@
 """Chapter-4 and chapter-6 paper figures in --quick mode (full runs are @slow).
 
 Each script's ``main(["--quick", "--out", tmp])`` returns its check points (exact analytic numbers
-of spec/collisions.md §11, like-for-like published values, and trend checks); all must pass and
+of thesis chs. 4 and 6, like-for-like published values, and trend checks); all must pass and
 the PNG must exist.
 """
 

@@ -1,4 +1,4 @@
-"""Thesis ch. 6 tabulated recipe: spec/collisions.md §6.3-6.5 (printed tables, interpolation S2,
+"""Thesis ch. 6 tabulated recipe: thesis §6.3-6.5 (printed Tabs. 6.7/6.9, interpolation, erratum 14,
 loader, surrogate, outcome assembly and mass conservation)."""
 
 import jax
@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxcoag._validate import JaxcoagInputError
 from jaxcoag.physics import recipes as RC
 from jaxcoag.physics.contact import Material
 from jaxcoag.physics.porosity import phi_hit_and_stick_o09
@@ -97,6 +98,141 @@ def test_loader_round_trip_and_errors(tmp_path):
     (tmp_path / "bad.dat").write_text("# GLOBAL, b=0.0, Q=foo\n0 1 2\n1 0 0\n")
     with pytest.raises(ValueError, match="unknown quantity"):
         RC.RecipeTables.from_cds(tmp_path / "bad.dat")
+
+
+# Thesis App. 6.A layout of the published tables, typed from the printed Tabs. 6.7 and 6.9: the
+# header, a column-title line, the phi_ini row with an empty corner cell, then tab-separated rows
+# of eps and values (digits as printed, e.g. "0.01500").
+TAB6_7_PRINTED = """# GLOBAL, b=0.0, Q=fpwl
+ε\tφ^ini
+\t0.121938\t0.155263\t0.189273\t0.250536
+0.000572118\t0.00000\t0.00000\t0.00000\t0.00000
+0.0205945\t0.00000\t0.002500\t0.00000\t0.00000
+0.0572069\t0.000833\t0.00000\t0.00000\t0.00000
+0.128715\t0.092500\t0.030417\t0.008750\t0.0029167
+0.228827\t0.388750\t0.094167\t0.030417\t0.01500
+0.915310\t0.957500\t0.603333\t0.243750\t0.115833
+3.66124\t1.00000\t1.00000\t1.00000\t0.727083
+8.23779\t1.00000\t1.00000\t1.00000\t1.00000
+14.6450\t1.00000\t1.00000\t1.00000\t1.00000
+"""
+TAB6_9_PRINTED = """# LOCAL, b=0.0, Q=fpwl
+E\tφ^ini
+\t0.0700907\t0.0904748\t0.126801\t0.160992
+0.228847\t0.00000\t0.00000\t0.00000\t0.00000
+0.915388\t1.00100\t0.333667\t0.00000\t0.00000
+3.66124\t4.00400\t46.5465\t6.33967\t0.667333
+14.6450\t7.00700\t67.0670\t35.2018\t9.00900
+32.9511\t7.50750\t148.315\t58.2248\t16.0160
+58.5798\t9.50950\t129.129\t62.3957\t30.0300
+"""
+# the start of a CDS catalogue ReadMe (byte-by-byte description), which lies beside the tables
+README = """J/A+A/502/845    Dust coagulation in molecular clouds    (Ormel+, 2009)
+================================================================================
+Byte-by-byte Description of file: *.dat
+--------------------------------------------------------------------------------
+   Bytes Format Units   Label     Explanations
+--------------------------------------------------------------------------------
+   1- 11  F11.6 ---     eps       Dimensionless energy parameter
+  13- 22  F10.6 ---     Q         Tabulated quantity at the first phi
+--------------------------------------------------------------------------------
+"""
+FMISS_COL = (1.2, 1.4, 1.7, 2.1)  # a_out/a axis of fmiss (App. 6.A: not phi)
+
+
+def _code(iq, ib, ie, ic):
+    """A distinct exact value per table node, to check where every number lands."""
+    return float(iq + 10 * ib + 100 * ie + 1000 * ic)
+
+
+def _printed_block(recipe, b, q, iq, ib, fixed):
+    glob = recipe.upper() == "GLOBAL"
+    eps = np.array(RC.GLOBAL_EPS if glob else RC.LOCAL_EPS) * (10.0 if q in ("Csig", "Cphi") else 1.0)
+    col = FMISS_COL if q == "fmiss" else (RC.GLOBAL_PHI if glob else RC.LOCAL_PHI)
+    if fixed:  # fixed-width columns, blanks as separators, corner cell blank
+        lines = [f"# {recipe}, b={b:.3f}, Q={q}", " " * 12 + "".join(f"{c:>11g}" for c in col)]
+        lines += [f"{e:>11.6g} " + "".join(f"{_code(iq, ib, ie, ic):>11.1f}" for ic in range(len(col)))
+                  for ie, e in enumerate(eps)]
+    else:
+        lines = [f"# {recipe}, b={b}, Q={q}", "ε\tφ^ini", "\t" + "\t".join(f"{c:g}" for c in col)]
+        lines += [f"{e:.6g}\t" + "\t".join(f"{_code(iq, ib, ie, ic):g}" for ic in range(len(col)))
+                  for ie, e in enumerate(eps)]
+    return "\n".join(lines) + "\n"
+
+
+def test_loader_reads_the_published_layout(tmp_path):
+    """from_cds on the thesis App. 6.A layout (printed Tabs. 6.7/6.9 typed by hand, CDS quantity
+    names Nfk/Cphi, mixed-case recipe, fixed-width and tab-separated tables, gzip, a ReadMe beside
+    the data): every number lands on its (Q, b, eps, phi) node."""
+    import gzip
+
+    cds_name = {"Nf": "Nfk", "Csig": "Cphi"}
+    for recipe, printed, fname in (("GLOBAL", TAB6_7_PRINTED, "global.dat"), ("Local", TAB6_9_PRINTED, "local.dat.gz")):
+        parts = [printed]
+        for iq, q in enumerate(RC.QUANTITIES):
+            for ib, b in enumerate(RC.B_GRID):
+                if (q, ib) != ("fpwl", 0):
+                    parts.append(_printed_block(recipe, b, cds_name.get(q, q), iq, ib, fixed=(ib % 2 == 1)))
+        text = "\n".join(parts)
+        if fname.endswith(".gz"):
+            (tmp_path / fname).write_bytes(gzip.compress(text.encode("utf-8")))
+        else:
+            (tmp_path / fname).write_text(text, encoding="utf-8")
+    (tmp_path / "ReadMe").write_text(README)
+    T2 = RC.RecipeTables.from_cds(tmp_path)
+    assert not T2.is_surrogate
+    iq = RC.QUANTITIES.index
+    for t, eps, phi, tab in ((T2.glob, RC.GLOBAL_EPS, RC.GLOBAL_PHI, RC.TAB6_7),
+                             (T2.loc, RC.LOCAL_EPS, RC.LOCAL_PHI, RC.TAB6_9)):
+        np.testing.assert_array_equal(np.asarray(t.b), RC.B_GRID)
+        # the printed b = 0 fpwl tables, at their nodes, through the interpolator
+        E, P = np.meshgrid(eps, phi, indexing="ij")
+        np.testing.assert_allclose(np.asarray(RC.interpolate(t, "fpwl", E, P, 0.0)), np.array(tab), rtol=1e-12, atol=0)
+        np.testing.assert_allclose(np.asarray(t.col[iq("fmiss")]), FMISS_COL, rtol=1e-15)
+        np.testing.assert_allclose(np.asarray(t.col[iq("q")]), phi, rtol=1e-15)
+        np.testing.assert_allclose(np.asarray(t.eps[iq("Csig")]), 10.0 * np.array(eps), rtol=1e-6)
+        np.testing.assert_allclose(np.asarray(t.eps[iq("Sf")]), eps, rtol=1e-6)
+        V = np.asarray(t.values)
+        for q in RC.QUANTITIES:
+            for ib in range(len(RC.B_GRID)):
+                if (q, ib) == ("fpwl", 0):
+                    continue
+                want = [[_code(iq(q), ib, ie, ic) for ic in range(4)] for ie in range(len(eps))]
+                np.testing.assert_array_equal(V[iq(q), ib], want, err_msg=f"{q} b={RC.B_GRID[ib]}")
+    # bad layouts say what to change
+    (tmp_path / "local.dat.gz").unlink()
+    (tmp_path / "global.dat").write_text(TAB6_7_PRINTED.replace("\t0.250536\n", "\n"))
+    with pytest.raises(JaxcoagInputError, match="axis row has 3 numbers but the data rows have 4"):
+        RC.RecipeTables.from_cds(tmp_path)
+    (tmp_path / "global.dat").write_text(TAB6_7_PRINTED.replace("0.0205945\t0.00000\t", "0.0205945\t0.0000O\t"))
+    with pytest.raises(JaxcoagInputError, match="'0.0000O' is not a number"):
+        RC.RecipeTables.from_cds(tmp_path)
+    (tmp_path / "global.dat").write_text(TAB6_7_PRINTED.replace("0.0205945\t0.00000\t", "0.0205945\t"))
+    with pytest.raises(JaxcoagInputError, match="4 numbers, but the first data row has 5"):
+        RC.RecipeTables.from_cds(tmp_path)
+    (tmp_path / "global.dat").write_text(TAB6_7_PRINTED + TAB6_7_PRINTED)
+    with pytest.raises(JaxcoagInputError, match="appears twice"):
+        RC.RecipeTables.from_cds(tmp_path)
+
+
+def test_surrogate_fpwl_offset_scaling_uses_each_recipe_phi_range():
+    """Surrogate fpwl at b = 0.75 is 25 % of the b = 0 value in the most compact phi column and
+    6 % in the least compact one, for the local recipe (phi 0.070..0.161) as for the global one
+    (phi 0.122..0.251) - not the global phi range applied to the local columns (6-12 %)."""
+    iq = RC.QUANTITIES.index("fpwl")
+    ib = RC.B_GRID.index(0.75)
+    for t, tab in ((T.glob, RC.TAB6_7), (T.loc, RC.TAB6_9)):
+        V = np.asarray(t.values[iq])
+        tab = np.array(tab)
+        big = tab[:, 0] > 0
+        np.testing.assert_allclose(V[ib][big, 0] / tab[big, 0], 0.06, rtol=1e-12)
+        big = tab[:, -1] > 0
+        np.testing.assert_allclose(V[ib][big, -1] / tab[big, -1], 0.25, rtol=1e-12)
+        # in between: linear in phi on the recipe's own grid
+        phi = np.asarray(t.col[iq])
+        big = tab[:, 1] > 0
+        np.testing.assert_allclose(V[ib][big, 1] / tab[big, 1],
+                                   0.06 + 0.19 * (phi[1] - phi[0]) / (phi[-1] - phi[0]), rtol=1e-12)
 
 
 def test_surrogate_constraints():

@@ -1,5 +1,5 @@
 """jaxcoag.analytic.runaway_time_chain / log_explosion_cdf: the monomer-bath birth-chain reference
-for the runaway time of K = (m_i m_j)^nu (spec §4.7 F5.7; Malyshkin & Goodman 2001).
+for the runaway time of K = (m_i m_j)^nu (thesis Fig. 5.7; Malyshkin & Goodman 2001).
 
 Checks: the saddlepoint F against brute-force sampling of T = sum_{k>=2} E_k/k^nu and against
 its large-deviation asymptote; the outer integrals against a direct Monte Carlo of the model;

@@ -1,7 +1,7 @@
-"""OC07 turbulent relative velocity: spec/velocities.md §9 checks #1-#30, §10 tables, §8.4 derivatives.
+"""OC07 turbulent relative velocity (Ormel & Cuzzi 2007 = thesis ch. 3): checks, tables, derivatives.
 
-All reference numbers are hard-coded from /work/shared/spec/velocities.md (float64 independent
-reference implementation unless marked "thesis").
+All reference numbers are hard-coded from a float64 independent reference implementation of the
+thesis formulas (not shipped) unless marked "thesis".
 """
 
 import jax
@@ -184,7 +184,7 @@ def test_18_heavy_vs_eq326(a, b, ref):
     approx = float(T.dv2_heavy_eq326(a, b))
     d = (full - approx) / approx
     # 1e-6 relative tolerance on the difference, floored by float64 rounding of the totals
-    # the spec prints the difference to 2-3 significant digits
+    # the reference prints the difference to 2-3 significant digits
     assert abs(d - ref) <= 2e-2 * abs(ref) + 2e-15
 
 
@@ -390,12 +390,12 @@ def test_29_dv_derivative_table(a, b, re, v, da, db, dlnre):
     assert rel(float(val), v) < 1e-8
     assert rel(float(ga), da) < 1e-5
     assert rel(float(gb), db) < 1e-5
-    # spec: 1e-9 absolute; its d/dlnRe column is printed to 5 digits, so allow half a unit there
+    # reference: 1e-9 absolute; its d/dlnRe column is printed to 5 digits, so allow half a unit there
     assert abs(float(gr) - dlnre) < max(1e-9, 5e-5 * abs(dlnre))
 
 
 def test_29_tie_gradient():
-    # max(St*_1, St*_2) at a tie: JAX splits the gradient 1/2-1/2 = central difference (spec §8.5.3)
+    # max(St*_1, St*_2) at a tie: JAX splits the gradient 1/2-1/2 = central difference (velocity hazard 5, item 3)
     ga, gb = jax.grad(lambda a, b: T.dv_turbulent_oc07(a, b, RE8), argnums=(0, 1))(0.1, 0.1)
     assert rel(float(ga), 1.02640450) < 1e-6
     assert rel(float(gb), 1.02640450) < 1e-6
@@ -511,7 +511,7 @@ def test_jit_equals_eager_and_vmap_equals_loop(method, accurate):
 
 
 def test_matrix_from_per_particle_st_star():
-    # N x N kernel from N root solves (spec §8.6) == the pairwise convenience function
+    # N x N kernel from N root solves (velocity hazard 6) == the pairwise convenience function
     st = jnp.logspace(-7, 2, 40)
     re = 1e8
     s = T.st_star(st, re)

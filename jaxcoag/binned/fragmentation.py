@@ -12,7 +12,9 @@ Recipes (``Shattering``):
   m_L + m_S is redistributed as a power law n(m) dm ~ m^-q dm (q = 11/6 default, Dohnanyi)
   from the bottom of the grid up to the upper edge of the larger body's bin, i.e. bin b <= L
   receives the fraction int_b m^{1-q} dm / int_{m_min}^{m_L,hi} m^{1-q} dm.
-* erosion/cratering (m_L/m_S >= ``crater_ratio``, default 10): the projectile excavates
+* erosion/cratering (m_L/m_S >= ``crater_ratio``, default 10; a pair at exactly the ratio
+  erodes, decided with the grid tolerance :data:`~jaxcoag.binned.grid.LOG_TOL`, see
+  :class:`Shattering`): the projectile excavates
   ``chi`` times its own mass (default 1) from the target; the ejecta (1 + chi) m_S are
   redistributed as the power law up to the projectile's bin, the remnant m_L - chi m_S is
   placed by the two-bin split between its neighbouring bins (merged with the loss of L when
@@ -46,6 +48,7 @@ import jax.numpy as jnp
 
 from .._validate import JaxcoagInputError, check
 from ..physics import fragmentation as pfrag
+from .grid import LOG_TOL
 
 __all__ = ["AbstractFragmentation", "Shattering", "ShatterToMonomers", "FragData",
            "powerlaw_weights"]
@@ -145,7 +148,13 @@ class Shattering(AbstractFragmentation):
         probability: "maxwellian" (default) | "sigmoid" | "linear" | "step" (static).
         width: transition width of "sigmoid" (ln units) / "linear" (fraction of v_frag).
         crater_ratio: mass ratio m_L/m_S at and above which collisions erode instead of
-            shattering (static, default 10).
+            shattering (static, default 10). A pair at exactly the ratio erodes: the branch
+            is ln(m_L/m_S) >= ln(crater_ratio) - LOG_TOL (LOG_TOL = 1e-9, i.e. a relative 1e-9,
+            :data:`jaxcoag.binned.grid.LOG_TOL`), so pairs whose centres lie exactly
+            crater_ratio apart (7 bins apart on a 7-per-decade grid with crater_ratio = 10)
+            all erode instead of choosing by the round-off of the log-centres (which made 39 of
+            133 such pairs of a 1e-12..1e8 g grid shatter), and crater_ratio = 10 and
+            10 (1 - 1e-9) give the same run. Equal-mass pairs (i = j) never erode.
         chi: eroded target mass in units of the projectile mass (static, default 1).
 
     References: Brauer et al. (2008) §2.3; Birnstiel et al. (2010) eq. 15; DustPy (2022) §2.2.
@@ -181,10 +190,10 @@ class Shattering(AbstractFragmentation):
         return _PROB[self.probability_kind](dv2, self.v_frag)
 
     def twobin_data(self, kernel, grid, iL, iS):
-        """FragData: shattering (ratio < crater_ratio) / erosion (ratio >= crater_ratio)."""
+        """FragData: shattering (ratio < crater_ratio) / erosion (ratio >= crater_ratio, to LOG_TOL)."""
         lc = grid.log_centers
         mL, mS = np.exp(lc[iL]), np.exp(lc[iS])
-        crater = (lc[iL] - lc[iS]) >= np.log(self.crater_ratio)
+        crater = (iL > iS) & ((lc[iL] - lc[iS]) >= np.log(self.crater_ratio) - LOG_TOL)
         # shattering rows: -m_S at S, -m_L at L; ejecta m_L + m_S from source L
         # erosion rows: -m_S at S, remnant placement at (L, k, k+1); ejecta (1+chi) m_S from source S
         chi_mS = self.chi * mS
@@ -212,6 +221,11 @@ class ShatterToMonomers(AbstractFragmentation):
 
     A collision whose product mass m_L + m_S exceeds ``m_frag`` [g] does not stick: all its
     mass goes to the lowest bin (the monomers). Velocity-free; works with analytic kernels.
+    "Exceeds" is decided to a relative tolerance LOG_TOL = 1e-9
+    (:data:`jaxcoag.binned.grid.LOG_TOL`): a product exactly at m_frag sticks (as in the Monte
+    Carlo :class:`jaxcoag.mc.CatastrophicFragmentation`) even when the sum of the two bin
+    centres rounds above it (e.g. 2 m_2 = 8.000000000000002 g = m_frag (1 + 2e-16) on a grid
+    with centres 1, 2, 4, ... g).
 
     References: Ormel (2008) thesis §5.3.4, Figs. 5.8-5.9 (steady state f ~ m^-(3+beta)/2,
     i.e. m^-3/2 for the constant kernel).
@@ -224,8 +238,8 @@ class ShatterToMonomers(AbstractFragmentation):
         self.m_frag = check(m_frag, "m_frag", positive=True, hint="mass threshold in g above which products shatter")
 
     def probability(self, kernel, m_large, m_small):
-        """1 where m_large + m_small > m_frag, else 0 (hard threshold)."""
-        return jnp.where(m_large + m_small > self.m_frag, 1.0, 0.0)
+        """1 where m_large + m_small > m_frag (1 + LOG_TOL), else 0 (hard threshold)."""
+        return jnp.where(m_large + m_small > self.m_frag * (1.0 + LOG_TOL), 1.0, 0.0)
 
     def twobin_data(self, kernel, grid, iL, iS):
         """FragData: -m_S at S, -m_L at L, ejecta m_L + m_S all into bin 0."""

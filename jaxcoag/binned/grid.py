@@ -12,12 +12,71 @@ References: Brauer, Dullemond & Henning (2008), A&A 480, 859 (log grid); DustPy
 
 from __future__ import annotations
 
+import math
+import os
+
 import numpy as np
 import jax.numpy as jnp
 
 from .._validate import JaxcoagInputError
 
-__all__ = ["MassGrid", "monodisperse", "mrn", "exponential"]
+__all__ = ["MassGrid", "monodisperse", "mrn", "exponential", "LOG_TOL", "memory_limit_bytes",
+           "GRID_BYTES_PER_BIN"]
+
+#: Tolerance [ln g] of every decision that compares a mass, a mass ratio or a mass sum built
+#: from grid masses with a boundary (an edge, a threshold ratio such as a cratering ratio).
+#: ``log_edges`` and ``log_centers`` carry an absolute round-off of a few ulp of |ln m|
+#: (measured: at most 1.04e-13 for the factor-10 offsets of a 1e-20..1e140 g grid at 7 bins
+#: per decade), so values that coincide mathematically (a pair of centres exactly a factor 10
+#: apart, a mass exactly on an edge) land on either side of a bare ``>=`` by chance. A value
+#: within LOG_TOL (a relative 1e-9 in mass) of a boundary counts as *on* the boundary; real
+#: grid spacings (ln 10 / bins_per_decade ~ 0.1-1) are 8 orders of magnitude wider.
+LOG_TOL = 1e-9
+
+
+#: Bytes per bin of a MassGrid's own numpy arrays (log_edges, log_centers, edges, centers,
+#: widths and their temporaries: 8 float64 arrays of nbins (+1) entries).
+GRID_BYTES_PER_BIN = 64
+
+
+def memory_limit_bytes() -> float:
+    """Largest memory estimate [bytes] a binned run may need before it is refused up front.
+
+    The environment variable ``JAXCOAG_MEMORY_LIMIT_GB`` (GiB, > 0) sets it; otherwise it is half
+    the physical memory of this machine (``os.sysconf("SC_PHYS_PAGES") * SC_PAGE_SIZE``) and, on an
+    accelerator whose JAX device reports a ``bytes_limit``, at most that. inf where neither is
+    known (no refusal).
+    """
+    env = os.environ.get("JAXCOAG_MEMORY_LIMIT_GB", "").strip()
+    if env:
+        try:
+            v = float(env)
+        except ValueError:
+            v = float("nan")
+        if not (math.isfinite(v) and v > 0):
+            raise JaxcoagInputError(f"JAXCOAG_MEMORY_LIMIT_GB must be a number of GiB > 0, got {env!r}; "
+                                    "unset it to use half the physical memory.")
+        return v * 2.0 ** 30
+    limit = float("inf")
+    try:
+        limit = 0.5 * float(os.sysconf("SC_PAGE_SIZE")) * float(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):  # pragma: no cover - non-POSIX
+        pass
+    try:
+        import jax
+
+        dev = jax.devices()[0]
+        if dev.platform != "cpu":
+            stats = dev.memory_stats() or {}
+            if stats.get("bytes_limit"):
+                limit = min(limit, float(stats["bytes_limit"]))
+    except Exception:  # pragma: no cover - a backend without memory statistics
+        pass
+    return limit
+
+
+def _gib(nbytes) -> str:
+    return f"{nbytes / 2.0 ** 30:.3g} GiB"
 
 
 class MassGrid:
@@ -106,6 +165,11 @@ class MassGrid:
             raise JaxcoagInputError(
                 f"[m_min, m_max] at {bins_per_decade} bins/decade gives {n} bin(s); need at least 2. "
                 "Increase bins_per_decade or widen the range.")
+        need = (n + 1.0) * GRID_BYTES_PER_BIN
+        if need > memory_limit_bytes():  # before any allocation (e.g. bins_per_decade = 1e12)
+            raise JaxcoagInputError(
+                f"{decades:.4g} decades at {bins_per_decade:g} bins/decade give {n:.4g} bins, whose grid arrays "
+                f"alone need {_gib(need)} (limit {_gib(memory_limit_bytes())}); lower bins_per_decade.")
         le = np.log(10.0) * (float(log10_min) + np.arange(n + 1) / float(bins_per_decade))
         return cls(le)
 
@@ -154,7 +218,10 @@ def monodisperse(grid: MassGrid, m0, rho_d):
     Arguments: grid; m0: monomer mass [g] (inside the grid); rho_d: dust mass density [g cm^-3].
     Returns: numpy (nbins,) array, rho_d / m_b in the bin b holding m0 (so the bin's mass is
     exactly rho_d; the particles carry the bin's center mass m_b - put m0 at a bin center,
-    e.g. ``MassGrid.log(m0 / 10**(0.5/bpd), ...)``, for analytic comparisons).
+    e.g. ``MassGrid.log(m0 / 10**(0.5/bpd), ...)``, for analytic comparisons). Bins are
+    [m_lo, m_hi): an m0 on an edge to a relative :data:`LOG_TOL` goes to the bin above that
+    edge (e.g. ``MassGrid.log(2.0, ...)`` has ln m_lo = ln 10 log10(2) > ln 2 by 1.1e-16, and m0 =
+    2 g is its first bin, not "outside the grid").
     References: Ormel (2008) thesis Table 5.1 (monodisperse start).
     """
     m0, rho_d = float(m0), float(rho_d)
@@ -163,9 +230,10 @@ def monodisperse(grid: MassGrid, m0, rho_d):
     if not (np.isfinite(m0) and m0 > 0):
         raise JaxcoagInputError(f"m0 must be a finite mass > 0 g (got {m0!r}).")
     lm = np.log(m0)
-    if not (grid.log_edges[0] <= lm < grid.log_edges[-1]):
+    if not (grid.log_edges[0] - LOG_TOL <= lm < grid.log_edges[-1] - LOG_TOL):
         raise JaxcoagInputError(f"m0 = {m0!r} g lies outside the grid [{grid.edges[0]:.3g}, {grid.edges[-1]:.3g}) g.")
-    b = int(np.searchsorted(grid.log_edges, lm, side="right") - 1)
+    # bins are [m_lo, m_hi): an m0 on an edge (to LOG_TOL) belongs to the bin above it
+    b = int(np.clip(np.searchsorted(grid.log_edges, lm + LOG_TOL, side="right") - 1, 0, grid.nbins - 1))
     n = np.zeros(grid.nbins)
     n[b] = rho_d * np.exp(-grid.log_centers[b])
     return n
@@ -214,7 +282,7 @@ def exponential(m0, n0):
 
     Arguments: m0: e-folding mass [g]; n0: total number density [cm^-3].
     Returns: a function of m [g] (numpy or JAX arrays).
-    References: Scott (1968); spec/montecarlo.md §4.3.
+    References: Scott (1968); Golovin (1963).
     """
     m0, n0 = float(m0), float(n0)
     if not (m0 > 0 and n0 > 0 and np.isfinite(m0) and np.isfinite(n0)):

@@ -4,7 +4,7 @@ The same recipe functions that drive the Monte Carlo engine (O07 with Dominik & 
 thresholds, the O09 tabulated recipe, ShatterAtMass, ...) are evaluated once per solve on the
 bin-centre pair grid (i >= j, i the larger body "L", j the smaller "S"), with the relative
 velocity dv = sqrt(``kernel.relative_velocity2``) of the scene kernel, and turned into a
-mass-exact redistribution on the two-bin grid (spec/collisions.md §9.2)::
+mass-exact redistribution on the two-bin grid (Birnstiel, Dullemond & Brauer 2010, eq. 15)::
 
     P_ij(m) = (1 - p_two) delta(m - M_L) + p_two [delta(m - s M_L) + delta(m - (1 - s) M_L)]
               + f_pwl M_tot g(m),     M_L = (1 - f_pwl) M_tot,  g ∝ m^q on [m_lo, m_hi]
@@ -16,14 +16,14 @@ mass-exact redistribution on the two-bin grid (spec/collisions.md §9.2)::
   so sweeping up a projectile 1e-20 times lighter than the target is not lost to cancellation
   (the same device as the coagulation tensors of :mod:`jaxcoag.binned.twobin`);
 * the fragment mass f_pwl M_tot is spread over the bins by the exact integral of m^(q+1) over
-  each bin's overlap with [m_lo, m_hi] (spec §6.6; a degenerate range, m_lo = m_hi, puts it in
+  each bin's overlap with [m_lo, m_hi] (thesis eqs. 6.29-6.30; a degenerate range, m_lo = m_hi, puts it in
   the bin holding m_lo, e.g. monomers); the range is clipped to the grid, mass-exactly;
 * the kernel is multiplied by ``eff`` = 1 - f_miss.
 
 Every pair's coefficients sum to zero, so sum(rho) + gel is conserved to round-off. Indices
 and coefficients are computed inside the solve from the recipe's (traced) outputs, so
 gradients with respect to material constants (gamma, E*, xi_crit, v_frag ...) flow through
-the solve; with ``width > 0`` (logistic regime switches, spec §9.3) they are non-zero.
+the solve; with ``width > 0`` (logistic regime switches, docs/design_notes.md) they are non-zero.
 
 A recipe may also declare a *mixture weight* w (``recipe.weight``): a fraction 1 - w of the
 collisions sticks perfectly (handled by the two-bin coagulation tensors) and w follows the
@@ -32,11 +32,11 @@ Outcome. This represents "fragment with probability p_f, else stick" exactly (e.
 Outcome alone cannot: its single remnant always has number 1.
 
 Compact particles only (psi = 1): the recipes are called with psi1 = psi2 = 1 and the
-remnant/fragment psi fields are not transported (spec §9.2's W = sum m psi moment is the
+remnant/fragment psi fields are not transported (the W = sum m psi moment is the
 porosity helper's job).
 
 References: Ormel 2008 thesis §6.5 (eqs. 6.25-6.30), §5.3.4; Brauer et al. (2008) App. A;
-Birnstiel, Dullemond & Brauer (2010) eq. 15; spec/collisions.md §6.6, §7, §9.
+Birnstiel, Dullemond & Brauer (2010) eq. 15; collision-outcome interface in docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ from ..physics.outcomes import DTEnergy, Outcome, ShatterAtMass, o07_outcome
 from ..physics.recipes import RecipeTables, o09_outcome
 from ..physics.safe import safe_sqrt
 from .fragmentation import AbstractFragmentation
+from .grid import LOG_TOL
 from .twobin import _ext_log_centers
 
 __all__ = ["OutcomeFragmentation", "OutcomeData", "O07Recipe", "O09Recipe", "ShatterAtMassRecipe",
@@ -72,7 +73,7 @@ class O07Recipe(eqx.Module):
 
     Fields: frag_model (AbstractFragModel or None), restr_factor (1 = ch. 2; 5 = DT),
     bounce_model (None, or BounceWhenCompact: [CHOICE] not from the sources).
-    References: Ormel 2008 thesis §2.2.3, Tab. 1.1; spec/collisions.md §4, §7.
+    References: Ormel 2008 thesis §2.2.3, Tab. 1.1; Wada et al. (2007) §5.5.
     """
 
     frag_model: Any = eqx.field(default_factory=DTEnergy)
@@ -92,7 +93,7 @@ class O09Recipe(eqx.Module):
 
     Fields: tables (RecipeTables; ``RecipeTables.surrogate()`` when the CDS set is absent:
     label results as surrogate), b_frac (None = average over p(b) ∝ b), kappa_glob (3).
-    References: Ormel 2008 thesis §6.3-6.5; spec/collisions.md §6.
+    References: Ormel 2008 thesis §6.3-6.5 (Ormel et al. 2009).
     """
 
     tables: RecipeTables = eqx.field(default_factory=RecipeTables.surrogate)
@@ -113,7 +114,7 @@ class ShatterAtMassRecipe(eqx.Module):
     """Thesis §5.3.4 test: products heavier than m_frag [g] shatter into monomers (mass m0 of
     the material). Velocity-free (works with analytic kernels).
 
-    References: Ormel 2008 thesis §5.3.4, Figs. 5.8-5.9; spec/collisions.md §7 (ShatterAtMass).
+    References: Ormel 2008 thesis §5.3.4, Figs. 5.8-5.9 (Ormel & Spaans 2008).
     """
 
     m_frag: jax.Array = eqx.field(converter=jnp.asarray)
@@ -166,14 +167,19 @@ def fragment_weights(log_edges, q, m_lo, m_hi):
     """Mass fractions of a fragment power law dn/dm ∝ m^q on [m_lo, m_hi] per bin.
 
     W[..., b] = int_{bin b ∩ [m_lo, m_hi]} m^(q+1) dm / int_{[m_lo, m_hi] ∩ grid} m^(q+1) dm
-    (exact bin integrals, spec §6.6; q = -2 and any q handled by expm1(x)/x). The range is
+    (exact bin integrals of m^(q+1); q = -2 and any q handled by expm1(x)/x). The range is
     clipped to the grid (mass-exact); a degenerate range (m_hi <= m_lo (1 + 1e-12), e.g.
-    monomers, or a range entirely outside the grid) puts all the mass in the bin holding m_lo.
+    monomers, or a range entirely outside the grid) puts all the mass in the bin holding m_lo;
+    bins are [m_lo, m_hi), and an m_lo on an interior edge to a relative LOG_TOL = 1e-9
+    (:data:`jaxcoag.binned.grid.LOG_TOL`) goes to the bin above the edge, not to the side the
+    round-off of ln m_lo happens to fall on (e.g. m_lo = 7 g, edge 7 of
+    ``MassGrid.log(0.7, 7e7, 7)``: ln 7 rounds 2.2e-16 below that edge).
 
     Arguments: log_edges: (N+1,) ln of the bin edges [ln g]; q: number slope [-]; m_lo, m_hi:
     fragment mass range [g] (arrays of a common shape S).
     Returns: (S..., N) weights, each row summing to 1.
-    References: Ormel 2008 thesis eqs. 6.29-6.30; spec/collisions.md §6.6, §9.2.
+    References: Ormel 2008 thesis eqs. 6.29-6.30; Birnstiel, Dullemond & Brauer (2010)
+    eq. 15.
     """
     le = jnp.asarray(log_edges)
     N = le.shape[0] - 1
@@ -197,7 +203,7 @@ def fragment_weights(log_edges, q, m_lo, m_hi):
     phi = jnp.where(small, 1.0 + 0.5 * x, jnp.expm1(x_s) / x_s)  # expm1(x)/x > 0
     logI = jnp.where(pos, s * a + jnp.log(w_s) + jnp.log(phi), -jnp.inf)
     W = jax.nn.softmax(logI, axis=-1)
-    kb = jnp.clip(jnp.searchsorted(le, llo[..., 0], side="right") - 1, 0, N - 1)
+    kb = jnp.clip(jnp.searchsorted(le, llo[..., 0] + LOG_TOL, side="right") - 1, 0, N - 1)
     onehot = jax.nn.one_hot(kb, N, dtype=W.dtype)
     return jnp.where(deg, onehot, W)
 
@@ -214,7 +220,7 @@ def place_remnant(lce, ref, l_ref, delta, nu):
     parent bins; l_ref: (P,) ln parent mass; delta: (P,) ln(m_r/m_ref); nu: (P,) number of
     remnants per collision.
     Returns: (idx (P, 3) int32, coef (P, 3) [g]) — mass per collision into bins idx.
-    References: Kovetz & Olund (1969); Brauer et al. (2008) App. A; spec/collisions.md §9.2.
+    References: Kovetz & Olund (1969); Brauer et al. (2008) App. A.
     """
     lce = jnp.asarray(lce)
     N = lce.shape[0] - 1
@@ -293,7 +299,8 @@ class OutcomeFragmentation(AbstractFragmentation):
         use_velocity: static; dv from ``kernel.relative_velocity2`` (default: True unless the
             recipe sets ``needs_velocity = False``, then dv = 0 and analytic kernels work).
 
-    References: spec/collisions.md §9.2 (binned consumer), §9.3 (smooth switches).
+    References: Birnstiel, Dullemond & Brauer (2010) eq. 15 (binned consumer); smooth regime
+    switches in docs/design_notes.md.
     """
 
     recipe: Callable

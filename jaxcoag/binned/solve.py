@@ -6,7 +6,7 @@
 diffrax. Failures are values: ``BinnedSolution.result`` is a :class:`RESULTS` item; with
 ``throw=True`` a failed solve raises (``eqx.error_if``) with the item's message.
 
-Time-integration defaults (DESIGN.md §5, measured):
+Time-integration defaults (docs/design_notes.md, traps measured):
 * pure coagulation: ``diffrax.Tsit5()`` (not stiff; implicit solvers were 50-100x slower);
 * with fragmentation: ``diffrax.Kvaerno5`` with an ``optimistix.Newton`` root finder (stiff
   equilibria; diffrax's default chord iteration rejected most steps near equilibrium); ``LinearlyImplicitEuler``
@@ -17,7 +17,7 @@ Time-integration defaults (DESIGN.md §5, measured):
 * an explicit ``dt0`` is always passed to diffrax (``dt0=None`` gave NaN gradients): when not
   given it is 1e-3 of the initial collision time M_tot / max|d rho/dt| (capped by the span).
 
-References: Kidger (2021) diffrax; Stammler & Birnstiel (2022, DustPy) §3; DESIGN.md §2, §5.
+References: Kidger (2021) diffrax; Stammler & Birnstiel (2022, DustPy) §3; docs/design_notes.md (house style, traps).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import optimistix as optx
 from .._validate import JaxcoagInputError, JaxcoagTypeError, check, is_traced, require_x64
 from ..kernels import AbstractKernel
 from .grid import MassGrid
-from .scheme import AbstractScheme
+from .scheme import AbstractScheme, check_memory
 from .twobin import TwoBinScheme
 
 __all__ = ["solve_binned", "BinnedSolution", "RESULTS", "make_scheme", "steady_state", "SteadyState"]
@@ -108,6 +108,17 @@ def make_scheme(scheme, order=0) -> AbstractScheme:
                                     f"available in this installation ({e}); use scheme='twobin'.") from e
         return dg.DGScheme(order=order)
     raise JaxcoagInputError(f"scheme must be 'twobin', 'dg' or an AbstractScheme instance (got {scheme!r}).")
+
+
+def _is_implicit(solver, fragmentation):
+    """Whether ``solver`` (as passed to solve_binned) builds a dense Jacobian (memory estimate)."""
+    from .solvers import LinearlyImplicitEuler
+
+    if solver is None:
+        return fragmentation is not None  # Kvaerno5 + Newton with fragmentation
+    if isinstance(solver, str):
+        return solver == "kvaerno5"
+    return isinstance(solver, (diffrax.AbstractImplicitSolver, LinearlyImplicitEuler))
 
 
 def _validate(model, grid, n0, ts, fragmentation):
@@ -245,11 +256,14 @@ def solve_binned(model, grid, n0, ts, *, scheme="twobin", order=0, fragmentation
         result, stats).
 
     References: Smoluchowski (1916); Brauer et al. (2008) App. A; Stammler & Birnstiel (2022);
-    Kidger (2021, diffrax); DESIGN.md §5 (solver/tolerance choices).
+    Kidger (2021, diffrax); docs/design_notes.md (solver/tolerance traps).
     """
     n0, ts = _validate(model, grid, n0, ts, fragmentation)
     _check_controls(rtol, atol, max_steps)
     sch = make_scheme(scheme, order)
+    # refuse a grid whose pair tensors cannot fit in memory before allocating any of them
+    check_memory(sch, grid.nbins, fragmentation=fragmentation, implicit=_is_implicit(solver, fragmentation),
+                 fix="use a coarser grid (fewer bins per decade in MassGrid.log)")
     y0 = sch.init(grid, n0)
     if callable(n0) and not is_traced(y0):
         if not bool(jnp.all(jnp.isfinite(y0))):
@@ -325,7 +339,7 @@ def steady_state(model, grid, n0, *, fragmentation, t_relax=None, y_guess=None, 
     Returns: SteadyState (mass_per_bin [g cm^-3], number_per_bin [cm^-3], residual, result).
 
     References: Birnstiel, Ormel & Dullemond (2011), A&A 525, A11 (fragmentation-limited steady
-    states); Blondel et al. (2022) / optimistix implicit differentiation; DESIGN.md §1.
+    states); Blondel et al. (2022) / optimistix implicit differentiation.
     """
     if fragmentation is None:
         raise JaxcoagInputError("steady_state needs a fragmentation model (coagulation alone never reaches one).")
@@ -335,6 +349,9 @@ def steady_state(model, grid, n0, *, fragmentation, t_relax=None, y_guess=None, 
     if isinstance(newton_steps, bool) or not isinstance(newton_steps, (int, np.integer)) or newton_steps < 1:
         raise JaxcoagInputError(f"newton_steps must be a positive int (e.g. 50); got {newton_steps!r}.")
     sch = make_scheme(scheme, order)
+    if isinstance(grid, MassGrid):  # the Newton polish builds the dense Jacobian (implicit)
+        check_memory(sch, grid.nbins, fragmentation=fragmentation, implicit=True,
+                     fix="use a coarser grid (fewer bins per decade in MassGrid.log)")
     if y_guess is None:
         if t_relax is None:
             raise JaxcoagInputError("steady_state needs t_relax (relaxation time in s) or y_guess (a state).")

@@ -7,7 +7,8 @@ bar), :class:`MCResult` (snapshots, statistics, ``to_xarray``), :class:`MCState`
 :class:`STATUS`, outcome modules (:class:`AbstractOutcome`, :class:`PerfectSticking`,
 :class:`CatastrophicFragmentation`, :class:`Products`) and the rate helper :func:`n_eps`.
 
-References: Ormel (2008) thesis ch. 5; spec/montecarlo.md.
+References: Ormel (2008) thesis ch. 5 (Ormel & Spaans 2008, ApJ 684, 1291); conventions, errata and
+hazards in docs/design_notes.md.
 """
 
 from .checkpoint import load_checkpoint as load_checkpoint
@@ -20,6 +21,8 @@ from .rates import n_eps as n_eps
 from .recipe_outcome import RainOutKernel as RainOutKernel, RecipeOutcome as RecipeOutcome, rainout_summary as rainout_summary
 from .results import MCResult as MCResult
 from .run import run as run
+from .run import CapacityWarning as CapacityWarning
+from .run import min_capacity as min_capacity
 from .state import STATUS as STATUS
 from .state import AbstractStop as AbstractStop
 from .state import InitialSpecies as InitialSpecies

@@ -13,8 +13,9 @@ maintenance counters live in the state, the assembled result equals one uninterr
 The checkpoint stores a SHA-256 fingerprint of the arguments (kernel and outcome parameters,
 all run keywords, output times, key); resuming with different arguments is refused.
 
-References: spec/montecarlo.md §3.8 (snapshots: the state is piecewise constant, the crossing
-event is redrawn identically after a stop at t_out), §3.9 (per-event keys via fold_in).
+References: Gillespie (1975) (the state is piecewise constant and the waiting time memoryless, so
+the crossing event is redrawn identically after a stop at t_out); per-event keys via fold_in
+(Monte Carlo conventions in docs/design_notes.md).
 """
 
 from __future__ import annotations
@@ -120,8 +121,15 @@ def _save(path, fingerprint, n_done, state, snaps, meta):
     atomic_write(path, write, what="checkpoint")
 
 
+_PHYSICAL = ("m", "logm", "psi", "w", "logV", "M_tot")  # never NaN in a run's state or snapshots
+
+
 def load_checkpoint(path):
     """Read a checkpoint written by :func:`run_checkpointed`.
+
+    A file that is truncated, not a jaxcoag.mc checkpoint (random bytes, another npz), lacks a
+    field or holds NaN masses / group numbers / volumes is refused with a
+    :class:`JaxcoagInputError` naming the file and what to do (delete it or resume=False).
 
     Returns:
         dict with ``fingerprint`` (str), ``n_done`` (output times completed), ``state``
@@ -129,11 +137,32 @@ def load_checkpoint(path):
         axis n_done), ``jax_version``, ``backend`` and ``meta`` (n_events, n_dup, n_merge,
         status, t_stop of the last segment and the run configuration as JSON).
     """
-    with np.load(os.fspath(path), allow_pickle=False) as z:
-        d = {k: z[k] for k in z.files}
-    if int(d.get("format", -1)) != _FORMAT:
-        raise JaxcoagInputError(f"{path!r} is not a jaxcoag.mc checkpoint of format {_FORMAT}; "
-                                "delete it or use resume=False")
+    import zipfile
+    import zlib
+
+    path = os.fspath(path)
+    todo = "delete it or use resume=False to start over"
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if not hasattr(z, "files"):
+                raise ValueError("a single array, not an npz archive")
+            d = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
+        why = "not an npz archive" if "pickle" in str(e) else (" ".join(str(e).split()) or type(e).__name__)
+        raise JaxcoagInputError(f"checkpoint {path!r} is truncated or not a jaxcoag.mc checkpoint ({why}); "
+                                f"{todo}") from e
+    fmt = d.get("format")
+    if fmt is None or fmt.ndim != 0 or fmt.dtype.kind not in "iu" or int(fmt) != _FORMAT:
+        raise JaxcoagInputError(f"{path!r} is not a jaxcoag.mc checkpoint of format {_FORMAT}; {todo}")
+    need = ["fingerprint", "n_done", "jax_version", "backend"] + [f"snap_{f}" for f in _SNAP_FIELDS] + \
+        [f"state_{f}" for f in MCState._fields if f != "snaps"]
+    miss = [k for k in need if k not in d] + [k for k in ("fingerprint", "n_done") if k in d and d[k].ndim != 0]
+    if miss:
+        raise JaxcoagInputError(f"checkpoint {path!r} is incomplete or inconsistent (fields {miss[:4]}); {todo}")
+    bad = [k for k in [f"state_{f}" for f in _PHYSICAL] + [f"snap_{f}" for f in _PHYSICAL]
+           if d[k].dtype.kind == "f" and np.isnan(d[k]).any()]
+    if bad:
+        raise JaxcoagInputError(f"checkpoint {path!r} holds NaN in {bad} (a corrupted file); {todo}")
     return dict(fingerprint=str(d["fingerprint"]), n_done=int(d["n_done"]), state=_state_from_arrays(d),
                 snaps={f: d[f"snap_{f}"] for f in _SNAP_FIELDS}, jax_version=str(d["jax_version"]),
                 backend=str(d["backend"]), meta={k[5:]: d[k] for k in d if k.startswith("meta_")})
@@ -159,7 +188,8 @@ def run_checkpointed(kernel, *, t_out, checkpoint, every=1, resume=True, progres
         ``run(kernel, t_out=t_out, key=key, **kwargs)``, also after an interruption and
         resume. ``final_state`` allows a further continuation.
 
-    References: spec/montecarlo.md §3.8-§3.9; jaxcoag.io.save_netcdf (same atomic-write pattern).
+    References: snapshots and PRNG in the Monte Carlo conventions of docs/design_notes.md;
+    jaxcoag.io.save_netcdf (same atomic-write pattern).
     """
     if "resume_from" in kwargs:
         raise JaxcoagInputError("run_checkpointed manages resume_from itself; drop it (use resume=True)")

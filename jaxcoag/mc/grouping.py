@@ -6,7 +6,7 @@ The zoom method only decides z; ``apply_zoom`` caps it so that w ≥ 1 and adjus
 smoothing safety valve that keeps the species count below the capacity.
 
 References: Ormel (2008) thesis §5.2.1 (limiting Ns: merging), §5.2.3-5.2.4 (zoom methods,
-(de)magnification), eq. (5.8), (5.14); spec/montecarlo.md §2.4, §2.5, §2.7, §3.6, §8.
+(de)magnification), eq. (5.8), (5.14), App. 5.B; errata of Ormel & Spaans (2008) in docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -31,7 +31,8 @@ def zoom_target_equal_mass(logm, log_mstar):
 
     Arguments: logm: ln particle mass [ln g]; log_mstar: ln m* [ln g].
     Returns: int32 target zoom.
-    References: Ormel (2008) eq. (5.14); spec/montecarlo.md §2.5, §8 (rounding).
+    References: Ormel (2008) eq. (5.14) (rounded down: see the Ormel & Spaans (2008)
+    errata in docs/design_notes.md).
     """
     return jnp.maximum(jnp.floor((log_mstar - logm) / LN2 + 1e-9), 0.0).astype(jnp.int32)
 
@@ -45,7 +46,7 @@ def distribution_nodes(logm, w, z, valid, log_mlo, log_ng_target, n_bins: int):
     occupied-bin values, piecewise linear in ln m, flat outside.
 
     Returns: (xp, fp), each (n_bins,), for ``jnp.interp``.
-    References: Ormel (2008) §5.2.3 (distribution method); spec/montecarlo.md §2.5 steps 1-4.
+    References: Ormel (2008) §5.2.3 (distribution method).
     """
     lmax = jnp.max(jnp.where(valid, logm, -jnp.inf))
     lmax = jnp.where(jnp.isfinite(lmax), lmax, log_mlo)
@@ -73,7 +74,8 @@ def distribution_nodes(logm, w, z, valid, log_mlo, log_ng_target, n_bins: int):
 def zoom_target_distribution(logm, xp, fp):
     """Distribution-method zoom target ⌊z(m)⌋ from the nodes of :func:`distribution_nodes`.
 
-    References: spec/montecarlo.md §2.5 step 5.
+    References: Ormel (2008) §5.2.3 (distribution method), §5.2.4 ((de)magnification); the cap
+    z <= floor(log2 g) is ours.
     """
     return jnp.maximum(jnp.floor(jnp.interp(logm, xp, fp)), 0.0).astype(jnp.int32)
 
@@ -95,7 +97,7 @@ def count_nodes(logm, w, z, valid, log_gc):
     Returns: (xp, fp), each (S,): xp = ln m of the species in increasing order (invalid slots
     placed above the heaviest, with the value of the heaviest), fp = max(0, log2(C/G_c)).
     References: Ormel (2008) §5.2.3 (distribution method; "a more flexible bin placement");
-    spec/montecarlo.md §2.5 (known weakness) **[own]**.
+    zoom method weakness in docs/design_notes.md **[own]**.
     """
     lg = jnp.where(valid, log_g(w, z), -jnp.inf)
     lmax = jnp.max(jnp.where(valid, logm, -jnp.inf))
@@ -135,7 +137,7 @@ def zoom_cap_tail(w, z, valid, log_rate, t, log_wmax, n_events=1.0):
     particle per unit time [ln s^-1]; t: current time [s]; log_wmax: ln W_max;
     n_events: expected group events per species within t (default 1).
     Returns: int32 cap (a large number on invalid slots).
-    References: Ormel (2008) §5.3.3 (demagnify so that t_11 << t_R); spec/montecarlo.md §2.5.
+    References: Ormel (2008) §5.3.3 (demagnify so that t_11 << t_R).
     """
     lg = log_g(jnp.where(valid, w, 1.0), z)
     lt = jnp.log(jnp.maximum(t, 1e-300))
@@ -156,7 +158,7 @@ def apply_zoom(w, z, zhat):
     Arguments: w (float), z (int), zhat (int target). Works elementwise; for w < 1 (only
     possible at z = 0 with non-integer multiplicities) the species stays at z = 0.
     Returns: (w_new, z_new).
-    References: spec/montecarlo.md §2.4 (vectorised (de)magnification).
+    References: Ormel (2008) §5.2.4 ((de)magnification; vectorised form [own]).
     """
     _, e = jnp.frexp(jnp.where(w > 0, w, 1.0))
     cap = z + (e - 1)
@@ -171,8 +173,8 @@ def demagnify(w, z, tol=1e-9):
 
     Returns: (w, z, alive). A species reaching z = 0 with w < 1 (non-integer multiplicity
     from fragmentation or merging) stays alive with that w.
-    References: Ormel (2008) §5.2.3-5.2.4, App. 5.B step 5.2; spec/montecarlo.md §2.3 step 4,
-    §3.6 (frexp closed form), §6 items 2-3.
+    References: Ormel (2008) §5.2.3-5.2.4, App. 5.B step 5.2 (closed form via frexp);
+    MC hazards 2-3 in docs/design_notes.md.
     """
     alive = w > jnp.ldexp(jnp.full_like(w, tol), -z)
     _, e = jnp.frexp(jnp.where(alive, w, 1.0))
@@ -194,7 +196,7 @@ def merge_pairs(m, logm, psi, w, z, valid, n_merge, p_protect: int, weighting: s
     is set to g/2^z (the caller rezooms).
 
     Returns: (m, logm, psi, w, z, valid, n_done).
-    References: Ormel (2008) §5.2.1 "Limiting Ns", App. 5.B 6.3; spec/montecarlo.md §2.7, §8.
+    References: Ormel (2008) §5.2.1 "Limiting Ns", App. 5.B 6.3; merging errata in docs/design_notes.md.
     """
     S = m.shape[0]
     key = jnp.where(valid, logm, jnp.inf)

@@ -9,7 +9,7 @@ to obtain the product multiplicity. New physics (porosity, bouncing, erosion) pl
 subclassing :class:`AbstractOutcome`; the event loop never changes.
 
 References: Ormel (2008) thesis §5.2.2 and App. 5.B step 5 (collision module), §5.3.4
-(catastrophic fragmentation into monomers above m_frag); spec/montecarlo.md §2.10.
+(catastrophic fragmentation into monomers above m_frag).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ class Products(NamedTuple):
 
 
 class AbstractOutcome(eqx.Module):
-    """Interface of a collision module (spec/montecarlo.md §2.10).
+    """Interface of a collision module (Ormel 2008 thesis App. 5.B step 5, ch. 6 §6.4).
 
     ``__call__(m_i, logm_i, psi_i, m_j, logm_j, psi_j, n_c, log_nc, key) -> Products``:
     the i-particle (mass ``m_i`` [g], log mass, structural vector ``psi_i`` of shape
@@ -79,8 +79,8 @@ class PerfectSticking(AbstractOutcome):
     Returns:
         ``Products`` with one entry (count 1 per i-particle).
 
-    References: Ormel (2008) thesis §5.2.2 (sequential accretion of n_c j-particles),
-    spec/montecarlo.md §2.3 step 1 ("m_new = m_i + n_c m_j").
+    References: Ormel (2008) thesis §5.2.2 (sequential accretion of n_c j-particles,
+    m_new = m_i + n_c m_j).
     """
 
     n_products: ClassVar[int] = 1
@@ -103,7 +103,7 @@ class CatastrophicFragmentation(AbstractOutcome):
     conserved exactly (count is real).
 
     References: Ormel (2008) thesis §5.3.4 ("particles above m_frag are catastrophically
-    fragmented into monomers"), Fig. 5.8/5.9; spec/montecarlo.md §2.10 last paragraph.
+    fragmented into monomers"), Fig. 5.8/5.9.
     """
 
     m_frag: jax.Array

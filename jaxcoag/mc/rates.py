@@ -1,7 +1,7 @@
 """Grouped collision rates in log space (volume-free, symmetric storage).
 
 The symmetric volume-free matrix is ``Λ'_ab = ½ λ^G_ab V`` (a ≠ b) and ``Λ'_aa = λ^G_aa V``
-with (eq. 5.31 and the z = 0 correction of spec §2.2)
+with (eq. 5.31 and the z = 0 correction of eq. 5.10b; errata in docs/design_notes.md)
 
     λ^G_ab = w_a w_b 2^{min(z_a, z_b) + N_eps(a, b)} C_ab                (a ≠ b)
     λ^G_aa = w_a (w_a 2^{z_a} − 1) C_aa      (z_a ≥ 1, in-group collapse)
@@ -11,7 +11,7 @@ with C = K/V. Everything is evaluated as logs (w up to 1e160, 2^z up to 2^1000, 
 spanning hundreds of decades): no product m1*m2, g_a*g_b or 2^z_a*2^z_b is ever formed.
 
 References: Ormel (2008) thesis eqs. (5.7), (5.10), (5.12), (5.13), (5.31), (5.32);
-spec/montecarlo.md §2.2, §3.4, §6 items 4-5.
+rate designs A/B and MC hazards 4-5 in docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -37,7 +37,8 @@ def n_eps(z_a, z_b, logm_a, logm_b, log2_feps, rounding: str = "ceil"):
         int32 N_eps = clip(round(x), 0, |z_a − z_b|), with x = (z_j − z_i) + log2 m_j − log2 m_i
         − log2 f_eps and i the lower-zoom member (N_eps = 0 for equal zooms).
 
-    References: Ormel (2008) eq. (5.12)/(5.32); spec/montecarlo.md §2.2 decisions (a)-(c), §8.
+    References: Ormel (2008) eq. (5.12)/(5.32) (ceil rounding, capped at z_j - z_i:
+    Ormel & Spaans (2008) errata in docs/design_notes.md).
     """
     a_low = z_a <= z_b
     dz = jnp.abs(z_a - z_b)
@@ -70,7 +71,7 @@ def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
     Returns:
         (S,) array ln Λ'_{a,b} [ln(cm^3 s^-1)] (multiply by exp(-ln V) for the event rate).
 
-    References: Ormel (2008) eqs. (5.7), (5.13), (5.31); spec/montecarlo.md §2.2, §3.4.
+    References: Ormel (2008) eqs. (5.7), (5.13), (5.31); rate designs in docs/design_notes.md.
     """
     S = logm.shape[0]
     la = jnp.broadcast_to(logm[a], (S,))
@@ -102,7 +103,7 @@ def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
 def log_rate_matrix(kernel, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
     """Full (S, S) matrix ln Λ' (rows of :func:`log_rate_row`); O(S^2) memory and work.
 
-    References: spec/montecarlo.md §3.4 design A.
+    References: Ormel (2008) eq. (5.31); rate design A in docs/design_notes.md.
     """
     S = logm.shape[0]
     return jax.vmap(lambda a: log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding))(
@@ -115,7 +116,7 @@ def row_sums(L):
     The scale s = max_a ln R_a keeps the largest row sum at 1 (rates of 1e300 and 1e-300 can
     coexist; rows below exp(s - 745) underflow to 0 and are re-derived on the next refresh).
 
-    References: spec/montecarlo.md §3.4 ("scale by the max before exponentiating").
+    References: MC hazard 5 in docs/design_notes.md (scale by the max before exponentiating).
     """
     rlog = jax.nn.logsumexp(L, axis=1)
     rlog = jnp.where(jnp.isnan(rlog), jnp.nan, rlog)
@@ -136,8 +137,8 @@ def log_particle_rates(kernel, logm, psi, w, z, valid):
     evaluations, in log space (kernels of 1e300 and multiplicities of 1e160 are fine).
 
     Returns: (S,) array, -inf on invalid slots.
-    References: spec/montecarlo.md §2.5 (runaway kernels: groups must collide on time
-    scales short compared to t_R), §3.1 (log space).
+    References: Ormel (2008) §5.3.3 (runaway kernels: groups must collide on time scales
+    short compared to t_R); log-space rates (docs/design_notes.md).
     """
     lg = jnp.where(valid, jnp.log(jnp.where(valid & (w > 0), w, 1.0)) + z.astype(logm.dtype) * LN2, -jnp.inf)
 

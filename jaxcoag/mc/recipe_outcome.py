@@ -15,7 +15,7 @@ with :func:`rainout_summary` (rained mass vs time, t_rain, t_99%, <a>, <m>, <psi
 
 References: Ormel (2008) thesis ch. 2 (§2.2.3 recipe, §2.4 eq. 2.25 rain-out, Tab. 2.2),
 §5.2.2 and App. 5.B step 5 (group events), eqs. 6.27-6.30 (fragments, at most one breakage
-per group event); spec/collisions.md §4, §9; spec/montecarlo.md §2.10.
+per group event); collision-outcome interface and errata in docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -44,13 +44,13 @@ def o07_recipe(*, n_small=None, **kw) -> Callable:
     B = 1, mF_over_m0 = 10, restr_factor = 1 by default = the ch. 2 settings; frag_model,
     bounce_model, width for variants). Input validation is off (engine hot loop).
 
-    n_small: small-N treatment (spec/collisions.md §4 hook ``psi_small_N``, erratum 20). The
+    n_small: small-N treatment (hook ``psi_small_N``, erratum 20 in docs/design_notes.md). The
         thesis takes psi from Ossenkopf's (1993) tables for N <= 40 and applies eq. 2.15 with
         psi_add only from N = 40 on ("zero point shifted from N = 1 to N = 40", T§2.2.3); the
         tables are not available. With ``n_small = 40`` collisions whose product has at most
         n_small monomers use the pure fractal hit-and-stick law (B = 0: the CCA/PCA limits,
-        psi <= N^0.425) instead [CHOICE]; None (default) applies psi_add from N = 1 (spec
-        default). Without it the early psi_add term makes CCA aggregates very fluffy
+        psi <= N^0.425) instead [CHOICE]; None (default) applies psi_add from N = 1 (the
+        library default). Without it the early psi_add term makes CCA aggregates very fluffy
         (psi(64) = 62 instead of 64^0.425 = 5.9).
     """
     B = kw.pop("B", 1.0)
@@ -59,7 +59,9 @@ def o07_recipe(*, n_small=None, **kw) -> Callable:
     n_small = float(n_small)
 
     def recipe(m1, psi1, m2, psi2, dv, mat):
-        small = (m1 + m2) / mat.m0 <= n_small
+        # N = (m1 + m2)/m0 of a product of exactly n_small monomers rounds to n_small (1 +- 1e-16)
+        # (sums of m0 in float64); decide "at most n_small" to a relative 1e-9, not by round-off
+        small = (m1 + m2) / mat.m0 <= n_small * (1.0 + 1e-9)
         return o07_outcome(m1, psi1, m2, psi2, dv, mat, validate=False, B=jnp.where(small, 0.0, B), **kw)
 
     return recipe
@@ -90,7 +92,7 @@ class RecipeOutcome(AbstractOutcome):
        last fragment takes the remainder and multiplicities are rescaled to make the total
        exact), at most ``n_frag`` distinct masses; psi = psi_fragment(m/m0, c_f).
 
-    Group events (the i-particle meets n_c > 1 j-particles, spec/montecarlo.md §2.10). Reading
+    Group events (the i-particle meets n_c > 1 j-particles, thesis App. 5.B step 5). Reading
     implemented [own]: the recipe is evaluated ONCE for the physical single pair (so the regime,
     e.g. hit-and-stick vs compaction, is decided by the single-collision energy (1/2) m_mu dv^2,
     not by a lumped energy n_c times larger), and the n_c sequential accretions are compounded
@@ -121,13 +123,13 @@ class RecipeOutcome(AbstractOutcome):
         n_frag: static, number of product species for fragments (0: the recipe must not
             fragment; f_pwl is then ignored). ``n_products = remnants + n_frag``.
         index: static, which structural parameter is psi (default 0).
-        c_f: prefactor of the fragments' psi(N) law (1, [CHOICE], spec §6.5).
+        c_f: prefactor of the fragments' psi(N) law (1, [CHOICE], erratum 18).
 
     Returns (``__call__``): :class:`~jaxcoag.mc.Products` with counts per i-particle; mass is
     conserved to rounding: sum(count m) = m_i + n_c m_j.
 
-    References: Ormel (2008) thesis §2.2.3 (eqs. 2.9-2.19), eqs. 6.27-6.30; spec/collisions.md
-    §4, §6.6, §9.2; spec/montecarlo.md §2.10.
+    References: Ormel (2008) thesis §2.2.3 (eqs. 2.9-2.19), eqs. 6.27-6.30, App. 5.B step 5;
+    errata 5, 6, 18, 20 in docs/design_notes.md.
     """
 
     kernel: AbstractKernel
@@ -265,7 +267,7 @@ class RainOutKernel(AbstractKernel):
         kernel: a physical kernel with ``particles(m, x).tau_f`` (a :class:`~jaxcoag.SceneKernel`).
         tau_rain: rain-out friction time [s]; default alpha/Omega of the kernel's gas (eq. 2.25).
 
-    References: Ormel (2008) thesis eq. 2.25 and §2.4; spec/collisions.md §11.1.
+    References: Ormel (2008) thesis eq. 2.25 and §2.4, Tab. 2.2.
     """
 
     base: AbstractKernel

@@ -1,8 +1,9 @@
 """Result container of the Monte Carlo engine with binned, moment and largest-particle
 diagnostics, and its conversion to an ``xarray.Dataset``.
 
-References: spec/montecarlo.md §3.8 (snapshot payload), §4.1 (densities from a simulation:
-n_b = Σ_{i∈b} g_i/V, ρ_b = Σ_{i∈b} g_i m_i/V), §3.1 (log-moments), §0 (M_L1, M_L2).
+References: Ormel (2008) thesis ch. 5, Table 5.1 units (densities from a simulation:
+n_b = Σ_{i∈b} g_i/V, ρ_b = Σ_{i∈b} g_i m_i/V); log-moments and M_L1, M_L2 as in the Monte Carlo
+conventions of docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ class MCResult(eqx.Module):
         config: static run configuration as (name, value) pairs (mode, grouping, capacity,
             kernel and outcome class, ...), used for dataset attributes.
 
-    References: Ormel (2008) thesis Table 5.4; spec/montecarlo.md §3.8.
+    References: Ormel (2008) thesis Table 5.4; snapshots in docs/design_notes.md (MC conventions).
     """
 
     t: jax.Array
@@ -92,7 +93,7 @@ class MCResult(eqx.Module):
     def log_moments(self, p):
         """(T,) ln M_p = ln(Σ_i g_i m_i^p / V) [ln(g^p cm^-3)] via logsumexp (overflow-free).
 
-        References: spec/montecarlo.md §3.1 (log-moments), §4.5 (Table 5.1 moments).
+        References: Ormel (2008) Table 5.1 (moments); log-moments (docs/design_notes.md).
         """
         x = jnp.where(self.valid, self.log_g + p * self.logm, -jnp.inf)
         return jax.nn.logsumexp(x, axis=-1) - self.logV
@@ -100,7 +101,7 @@ class MCResult(eqx.Module):
     def moments(self, p):
         """(T,) moments M_p = Σ_i g_i m_i^p / V [g^p cm^-3] (M0 number, M1 mass density).
 
-        References: Ormel (2008) eq. (5.4) and Table 5.1; spec/montecarlo.md §4.5.
+        References: Ormel (2008) eq. (5.4) and Table 5.1.
         """
         return jnp.exp(self.log_moments(p))
 
@@ -119,25 +120,25 @@ class MCResult(eqx.Module):
         """(T, nbins) mass density per mass bin [g cm^-3]: Σ_{edges[b] ≤ m_i < edges[b+1]} g_i m_i / V.
 
         Arguments: edges: (nbins+1,) increasing bin edges [g] (e.g. 2.0**arange(...)).
-        References: spec/montecarlo.md §4.1, §4.6 (factor-2 bins).
+        References: Ormel (2008) thesis §5.3 (factor-2 bins, m^2 f(m) plots).
         """
         return self._per_bin(edges, 1.0)
 
     def number_per_bin(self, edges):
         """(T, nbins) number density per mass bin [cm^-3]: Σ_{i in bin} g_i / V.
 
-        References: spec/montecarlo.md §4.1.
+        References: Ormel (2008) thesis §5.3 (factor-2 bins).
         """
         return self._per_bin(edges, 0.0)
 
     def largest_mass(self):
         """(T,) mass of the largest particle M_L1 [g].
 
-        References: spec/montecarlo.md §0 (M_L1), §4.4.
+        References: Ormel (2008) thesis §5.3.2 (M_L1); M_L1 in docs/design_notes.md (MC conventions).
         """
         return jnp.exp(jnp.max(jnp.where(self.valid, self.logm, -jnp.inf), axis=-1))
 
-    # ------------------------------------------------------------------ statistics (spec §0)
+    # ------------------------------------------------------------------ statistics
 
     def largest_two(self, kind="particle"):
         """(T,) masses (M_L1, M_L2) of the largest and second-largest particle [g].
@@ -145,7 +146,8 @@ class MCResult(eqx.Module):
         Arguments: kind: "particle" (default; if the largest species has g ≥ 2 then
             M_L2 = M_L1) or "species" (second-largest species mass).
         Returns: two (T,) arrays (0 where no such particle exists).
-        References: spec/montecarlo.md §0, §4.7 F5.6/F5.7, §8.
+        References: Ormel (2008) thesis §5.3.2-5.3.3, Figs. 5.6/5.7; MC hazard 12 in
+        docs/design_notes.md.
         """
         l1, l2 = largest_two(self.logm, self.w, self.z, self.valid, kind)
         return jnp.exp(l1), jnp.exp(l2)
@@ -196,7 +198,7 @@ class MCResult(eqx.Module):
 
     # ------------------------------------------------------------------ xarray
 
-    def to_xarray(self, attrs=None, edges=None):
+    def to_xarray(self, attrs=None, edges=None, kernel=None):
         """Labelled ``xarray.Dataset`` of one run (index a vmapped result first).
 
         Arguments:
@@ -205,17 +207,24 @@ class MCResult(eqx.Module):
             edges: optional (nbins+1,) increasing mass-bin edges [g]; adds the binned view
                 ``mass_per_bin`` [g cm^-3] and ``number_per_bin`` [cm^-3] on dims (time, mass)
                 with coords ``mass`` (geometric centres) and ``mass_edge``.
+            kernel: optional physical kernel the run used (``scene.kernel(gas, rho_s)``, compact
+                or porous); adds the grain radius ``a`` [cm] and Stokes number ``St`` [1] of every
+                species slot on (time, species) from ``kernel.particles(m, psi)`` (NaN on free
+                slots), and with ``edges`` of the bin-centre masses as coords ``a_bin``/``St_bin``
+                on ``mass`` (compact kernels only). Analytic kernels (no material density or gas
+                state) add nothing: a Stokes number is left out rather than invented.
 
         Returns:
             Dataset with dims ``time``, ``species`` (capacity slots) and ``struct`` (P);
             variables m [g], log_g, w, z, psi, valid (time, species); V [cm^3], M_tot [g],
             n_events, n_species, n_groups, log_n_particles, M_L1, M_L2 [g], log_M0, log_M1,
-            log_M2 (time); scalars status, n_events_total, n_dup, n_merge, t_stop [s].
+            log_M2 (time); scalars status, n_events_total, n_dup, n_merge, t_stop [s]. Coords
+            ``time`` [s] and ``t_yr`` [yr] (Julian years, t / 3.15576e7 s) on ``time``.
             Attributes: title, Conventions, status names, the static run configuration
             (mode, grouping, capacity, kernel, ...) and ``attrs``. Save it with
             :func:`jaxcoag.io.save_netcdf` (atomic).
 
-        References: CF conventions 1.10 (units, long_name); spec/montecarlo.md §3.8.
+        References: CF conventions 1.10 (units, long_name).
         """
         from ..io import _attr_value, _xr
 
@@ -260,7 +269,9 @@ class MCResult(eqx.Module):
             "t_stop": ((), np.float64(np.nan if self.t_stop is None else np.asarray(self.t_stop)),
                        {"units": "s", "long_name": "time the stop predicate fired (NaN: not stopped)"}),
         }
-        coords = {"time": ("time", a(self.t), {"units": "s", "long_name": "output time"}),
+        from ..io import particle_coords, time_coords
+
+        coords = {**time_coords(a(self.t)),
                   "species": ("species", np.arange(np.shape(self.m)[-1], dtype=np.int32),
                               {"units": "1", "long_name": "species slot index"})}
         if edges is not None:
@@ -273,6 +284,23 @@ class MCResult(eqx.Module):
                                       {"units": "cm-3", "long_name": "dust number density per mass bin"})
             coords["mass"] = ("mass", np.sqrt(e[:-1] * e[1:]), {"units": "g", "long_name": "geometric bin-center mass"})
             coords["mass_edge"] = ("mass_edge", e, {"units": "g", "long_name": "mass-bin edges"})
+            if kernel is not None and hasattr(kernel, "particles") and int(getattr(kernel, "n_struct", 0)) == 0:
+                for k, (dim, v, at) in particle_coords(kernel, coords["mass"][1]).items():
+                    coords[k + "_bin"] = (dim, v, at)
+        if kernel is not None and hasattr(kernel, "particles"):
+            ns = int(getattr(kernel, "n_struct", 0))
+            valid = np.asarray(self.valid, bool)
+            m_safe = np.where(valid, np.asarray(self.m, np.float64), 1.0)
+            if ns == 0:
+                p = kernel.particles(jnp.asarray(m_safe))
+            else:
+                psi = np.asarray(self.psi, np.float64)[..., :ns]
+                p = kernel.particles(jnp.asarray(m_safe), jnp.asarray(np.where(valid[..., None], psi, 1.0)))
+            data["a"] = (TS, np.where(valid, np.asarray(p.a, np.float64), np.nan),
+                         {"units": "cm", "long_name": "grain radius of each species slot (NaN on free slots)"})
+            data["St"] = (TS, np.where(valid, np.asarray(p.st, np.float64), np.nan),
+                          {"units": "1", "long_name": "Stokes number tau_f / t_L of each species slot in the run's gas "
+                                                      "(NaN on free slots)"})
         ds = xr.Dataset(data_vars=data, coords=coords)
         ds.attrs["title"] = "jaxcoag grouped Monte Carlo run"
         ds.attrs["Conventions"] = "CF-1.10"

@@ -13,7 +13,8 @@ The two-level loop keeps the O(S^2) refresh out of the per-event path even under
 (where ``lax.cond`` would evaluate both branches).
 
 References: Ormel (2008) thesis §2.3.2, ch. 5 (eqs. 5.6-5.13, 5.31-5.33, App. 5.A/5.B);
-Gillespie (1975); Smith & Matsoukas (1998); spec/montecarlo.md §1-§3, §6, §7.
+Gillespie (1975); Smith & Matsoukas (1998); conventions, defaults and MC hazards in
+docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from .rates import log_particle_rates, log_rate_matrix, log_rate_row, n_eps, row
 from .results import MCResult
 from .state import STATUS, InitialSpecies, MCState, Snapshots
 
-__all__ = ["run"]
+__all__ = ["run", "CapacityWarning", "min_capacity"]
 
 LN2 = 0.6931471805599453
 _MODES = ("const_v", "const_n", "const_ns")
@@ -122,8 +123,45 @@ def _fill(cfg, p, st, t_new):
 
 
 def _ns_hi_equal_mass(cfg):
-    """Species count above which an equal-mass run merges (spec §7: 0.9 S, below the emergency level)."""
+    """Species count above which an equal-mass run merges (default 0.9 S, below the emergency level)."""
     return min(math.floor(0.9 * cfg.capacity), cfg.capacity - cfg.n_prod - 3)
+
+
+def min_capacity(grouping, ns_target, n_products=1):
+    """Smallest ``capacity`` S whose merge threshold still holds ``ns_target`` species.
+
+    Grouped runs merge mass neighbours once the species count exceeds a fraction of S
+    (distribution: min(0.9 S, Ng*); equal-mass: min(0.9 S, S - n_products - 3), thesis §5.2.1,
+    App. 5.B); below this S the run would keep fewer species than ``ns_target`` asks for, i.e.
+    a coarser resolution than requested. None for grouping=None (no such threshold).
+    """
+    if grouping is None:
+        return None
+    nt = float(ns_target)
+    S = max(int(math.ceil(nt / 0.9)), 1)
+    while True:
+        hi = math.floor(0.9 * S) if grouping == "distribution" else min(math.floor(0.9 * S), S - n_products - 3)
+        if hi >= nt:
+            return S
+        S += 1
+
+
+class CapacityWarning(RuntimeWarning):
+    """A Monte Carlo run ran out of species slots: an emergency merge of mass neighbours lowered
+    its resolution (``STATUS.CAPACITY``); rerun with a larger ``capacity``."""
+
+
+def _warn_capacity(status, capacity):
+    """Warn (CapacityWarning) when any run in ``status`` (array of STATUS codes) has the CAPACITY flag."""
+    import warnings
+
+    st = np.asarray(status)
+    hit = int(np.count_nonzero(st & STATUS.CAPACITY))
+    if hit:
+        runs = f"{hit} of {st.size} runs" if st.size > 1 else "the run"
+        warnings.warn(f"jaxcoag.mc.run: {runs} ran out of species slots (capacity = {int(capacity)}); an emergency "
+                      "merge of mass neighbours lowered the resolution (status CAPACITY). Rerun with a larger "
+                      f"capacity, e.g. capacity={2 * int(capacity)}.", CapacityWarning, stacklevel=3)
 
 
 def _stop(st, cond, flag):
@@ -132,7 +170,7 @@ def _stop(st, cond, flag):
 
 
 def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
-    """Incremental row-sum update for the touched slots T (design B, spec §3.4)."""
+    """Incremental row-sum update for the touched slots T (rate design B, docs/design_notes.md)."""
     if cfg.rates == "full":
         return st._replace(dirty=jnp.array(True))
     Lold = jax.vmap(lambda a: _row(cfg, p, st_old_arrays, a))(T)
@@ -242,7 +280,7 @@ def _collide(cfg, p, st, a, b, key):
 
 
 def _duplicate(cfg, p, st, key, u0, log_mp):
-    """Duplication controller (const_n: one group per event; const_ns: spec §2.8)."""
+    """Duplication controller (const_n: one group per event; const_ns: thesis §5.3.1, ch. 6)."""
     if cfg.mode == "const_v":
         return st
 
@@ -293,7 +331,7 @@ def _event(cfg, p, st):
     log_lam = jnp.log(jnp.where(proceed, total, 1.0)) + st.s - st.logV
     E = -jnp.log1p(-u[0])  # Exp(1)
     t_new = st.t + E * jnp.exp(-log_lam)
-    # snapshots first (pre-event state, spec §3.8), outside the conds below: the snapshot buffers
+    # snapshots first (pre-event state, MC hazard 11), outside the conds below: the snapshot buffers
     # (n_snap x S per array) are then no operand of a lax.cond, which on CPU copied them on every
     # event (measured 116 -> 271 us/event going from 2 to 64 output times at S = 512)
     st = _fill(cfg, p, st, jnp.where(proceed, t_new, -jnp.inf))
@@ -377,8 +415,8 @@ def _maintenance(cfg, p, st):
         sched = ns > ns_hi
         ns_lo = jnp.floor(0.75 * ns_hi)
     elif cfg.grouping == "equal_mass":
-        # scheduled merge (spec §2.7, §7: Ns_hi = 0.9 S, Ns_lo = 0.7 S): the demagnification
-        # leftovers (spec §6 item 3) are merged with mass neighbours before the slots run out
+        # scheduled merge (thesis §5.2.1; Ns_hi = 0.9 S, Ns_lo = 0.7 S): the demagnification
+        # leftovers (MC hazard 3, docs/design_notes.md) are merged with mass neighbours before the slots run out
         sched = ns > _ns_hi_equal_mass(cfg)
         ns_lo = jnp.array(float(math.floor(0.7 * S)))
     else:
@@ -407,7 +445,7 @@ def _maintenance(cfg, p, st):
 
 
 def _monodisperse_state(cfg: _Cfg, p: dict, N, m0, struct0, key):
-    """Initial state: one species of N monomers of mass m0, V = N m0 / rho_d (spec §2.9)."""
+    """Initial state: one species of N monomers of mass m0, V = N m0 / rho_d (thesis App. 5.B)."""
     S, P = cfg.capacity, cfg.n_struct
     f = jnp.float64
     valid = jnp.zeros((S,), bool).at[0].set(True)
@@ -570,7 +608,10 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
         ns_target: Ns* (equal-mass / const_ns) or Ng* (distribution); default 1000.
         f_eps: maximum fractional mass gain per group event (eq. 5.11); default 1e-3.
         capacity: number of species slots S (static). Default: none: min(n_particles, 2048)+8;
-            equal_mass: 8 ns_target; distribution: 2 ns_target.
+            equal_mass: 8 ns_target; distribution: 2 ns_target. A grouped run whose capacity cannot
+            hold ns_target is refused up front (``min_capacity``); a run that still runs out of slots
+            merges mass neighbours (status CAPACITY) and warns with ``CapacityWarning``; under a
+            user's jit/vmap the flag is only in ``status`` (check it there).
         outcome: an ``AbstractOutcome`` (default ``PerfectSticking()``); e.g.
             ``CatastrophicFragmentation(m_frag, m0)``.
         struct0: initial structural vector (shape (P,), P ≥ 0) of the monomers; default empty
@@ -606,14 +647,14 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
             max(1, ns_target // 16)); also when M_L1 changes by 2^(1/4).
         leftover: "demagnify" (thesis; exact) or "stochastic" (a donor left with 0 < w < 1
             groups keeps one whole group with probability w, else is deleted: unbiased in
-            expectation, stops the demagnify cascade of spec §6 item 3; in const_v the
+            expectation, stops the demagnify cascade of MC hazard 3; in const_v the
             simulated mass then fluctuates, in const_n/const_ns V is rescaled to keep rho_d).
         count_groups: distribution method, runaway kernels (default None = off): G_c > 0 of the
             tail-count refinement (``grouping.count_nodes``). The zoom becomes min(thesis z(m),
             log2(C(m)/G_c)) with C(m) the number of particles at least as heavy as m, i.e. bins
             equally spaced in ln C: where the count falls steeply with mass (the seed tail of a
             runaway kernel) every species keeps >~ G_c groups and the rarest are single particles.
-            It only refines (lowers) the thesis zoom. [own; spec §2.5 "known weakness"]
+            It only refines (lowers) the thesis zoom. [own; the zoom weakness of docs/design_notes.md]
         tail_events: distribution method (default 0 = off): time-resolution cap of the zoom
             (``grouping.zoom_cap_tail``): every species gets at least ``tail_events`` expected
             group events per elapsed time t, w_i >= tail_events / (r_i t) (r_i = collisions per
@@ -634,7 +675,7 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
         ``jax.vmap``.
 
     References: Ormel & Spaans (2008) ApJ 684, 1291 = Ormel (2008) thesis ch. 5, eqs.
-        (5.6)-(5.14), (5.31)-(5.33), App. 5.B; §2.3.2 (constant-N/Ns); spec/montecarlo.md.
+        (5.6)-(5.14), (5.31)-(5.33), App. 5.B; §2.3.2 (constant-N/Ns); docs/design_notes.md.
     """
     require_x64("jaxcoag.mc.run")
     if not isinstance(kernel, AbstractKernel):
@@ -784,6 +825,16 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
     if resume_from is None and capacity < n_init + outcome.n_products + 2:
         raise JaxcoagInputError(f"capacity {capacity} cannot hold the {n_init} initial species; give capacity >= "
                                 f"{n_init + outcome.n_products + 2}")
+    if grouping is not None and not is_traced(ns_target):
+        # the merge threshold is a fraction of S: a smaller S would silently cap the species count
+        # below ns_target (a coarser run than asked for); refuse instead
+        s_min = min_capacity(grouping, float(ns_target), int(outcome.n_products))
+        if capacity < s_min:
+            raise JaxcoagInputError(
+                f"capacity = {capacity} species slots cannot hold ns_target = {float(ns_target):g} {grouping} species "
+                f"(the run merges species above ~0.9 capacity, which would silently lower the resolution); give "
+                f"capacity >= {s_min} (the default is {'8' if grouping == 'equal_mass' else '2'} x ns_target) "
+                "or lower ns_target")
     cfg = _Cfg(mode=mode, grouping=grouping, capacity=capacity, n_snap=int(t_arr.shape[0]),
                n_struct=int(struct0.shape[0]), n_prod=int(outcome.n_products), rates=rates,
                n_refresh=int(n_refresh if n_refresh is not None else (1 if rates == "full" else capacity)),
@@ -811,4 +862,9 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
     else:
         init = ("mono", n_particles, m0, struct0, key)
     res = _simulate_jit(cfg, p, init)
+    # out of species slots (emergency merge, STATUS.CAPACITY) lowers the resolution: say so. Inside
+    # the user's jit/vmap the flag is in res.status (failures are values): a host callback there
+    # would be unrolled once per vmapped lane (a 2e4-lane vmap then never finished compiling).
+    if not is_traced(res.status):
+        _warn_capacity(res.status, capacity)
     return jax.tree_util.tree_map(lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, res)

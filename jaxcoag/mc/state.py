@@ -4,8 +4,8 @@ Every species slot carries (m, log m, psi, w, z, valid); invalid slots hold the 
 m = 1, w = 0, z = 0. The multiplicity is g = w 2^z (never formed when it could overflow:
 use log g = log w + z ln 2).
 
-References: Ormel (2008) thesis Table 5.4 (state vector per species); spec/montecarlo.md
-§3.2 (state layout), §3.8 (snapshots), §6 (status flags).
+References: Ormel (2008) thesis Table 5.4 (state vector per species); snapshots and MC
+hazards (status flags) in docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def status_names(code) -> list[str]:
 def log_n_particles(w, z, valid):
     """ln Np = ln Σ_i g_i, g_i = w_i 2^{z_i}, over the last axis (overflow-free logsumexp).
 
-    References: Ormel (2008) eq. (5.9); spec/montecarlo.md §0.
+    References: Ormel (2008) eq. (5.9).
     """
     pos = valid & (w > 0)
     lg = jnp.where(pos, jnp.log(jnp.where(pos, w, 1.0)) + z.astype(w.dtype) * LN2, -jnp.inf)
@@ -72,14 +72,14 @@ def largest_two(logm, w, z, valid, kind: str = "particle"):
 
     Arguments:
         logm, w, z, valid: species arrays (any leading axes; species on the last axis).
-        kind: "particle" (default; spec §0/§6.12: if the largest species holds g ≥ 2 particles
+        kind: "particle" (default; MC hazard 12: if the largest species holds g ≥ 2 particles
             then M_L2 = M_L1) or "species" (largest and second-largest *species* mass, the
             thesis' "largest species/group" reading).
 
     Returns:
         (log_ML1, log_ML2); −inf where fewer than one (two) particles/species exist.
 
-    References: spec/montecarlo.md §0 (M_L1, M_L2), §4.7 F5.6/F5.7, §6 item 12, §8.
+    References: Ormel (2008) thesis §5.3.2-5.3.3, Figs. 5.6/5.7; MC hazard 12 in docs/design_notes.md.
     """
     if kind not in ("particle", "species"):
         raise ValueError(f"unknown kind {kind!r}; use 'particle' or 'species'")
@@ -155,7 +155,7 @@ class InitialSpecies(eqx.Module):
         psi: (Ns0, P) structural parameters.
         V: simulated volume [cm^3], or None: then V = M_tot / rho_d (``run``'s ``rho_d``).
 
-    References: Ormel (2008) eq. (5.8), Table 5.4; spec/montecarlo.md §2.1, §2.9.
+    References: Ormel (2008) eq. (5.8), Table 5.4, App. 5.B.
     """
 
     m: jax.Array
@@ -191,7 +191,7 @@ def initial_species(m, g=None, *, log_g=None, w=None, z=None, psi=None, V=None) 
     Returns:
         :class:`InitialSpecies`.
 
-    References: Ormel (2008) eqs. (5.8)-(5.9), Table 5.4; spec/montecarlo.md §2.1, §4.8 U6.
+    References: Ormel (2008) eqs. (5.8)-(5.9), Table 5.4, App. 5.A.
     """
     given = [x is not None for x in (g, log_g)] + [w is not None or z is not None]
     if sum(given) != 1:
@@ -255,14 +255,15 @@ class Runaway(AbstractStop):
     Arguments:
         ratio: threshold of the mass ratio of the largest to the second-largest particle
             (default 1e4, thesis §5.3.3). M_L2 is the *particle* statistic: if the largest
-            species holds ≥ 2 particles then M_L2 = M_L1 (spec §6 item 12).
+            species holds ≥ 2 particles then M_L2 = M_L1 (MC hazard 12).
         kind: "particle" (default) or "species" (second-largest *species*), see
             :func:`largest_two`.
 
     With it the runaway time t_R of Fig. 5.7 is ``MCResult.t_stop`` directly (for N = 300 the
     ratio is unreachable and the single-particle clause decides).
 
-    References: Ormel (2008) thesis §5.3.3, Fig. 5.7; spec/montecarlo.md §4.7 F5.7, §6 item 12, §8.
+    References: Ormel (2008) thesis §5.3.3, Fig. 5.7; MC hazard 12 and the §5.3.3
+    erratum in docs/design_notes.md.
     """
 
     log_ratio: jax.Array

@@ -3,7 +3,7 @@
 The kernel functions take the SQUARED total relative velocity ``dv2`` (the quadrature sum of
 Brownian, turbulent and drift components) and apply ONE double-``where`` safe sqrt, so that
 values and gradients stay finite where dv2 = 0 (identical particles in the tightly coupled
-regime; spec/velocities.md §6, §8.1, §8.6).
+regime; velocity hazards 1 and 6 in docs/design_notes.md).
 
 Gravitational focusing floor (documented): v_esc^2/Delta v^2 diverges as Delta v -> 0, so the
 focusing branch uses dv2_eff = max(dv2 + dv_floor^2, DV2_MIN) with ``dv_floor`` a user
@@ -17,7 +17,7 @@ signature and a leading underscore: ``_cross_section``, ``_v_esc2``, ``_focusing
 ``_kernel_sigma_dv``.
 
 References: Ormel (2008) PhD thesis ch. 4 footnote 6 (sigma = pi (a1 + a2)^2), eq. 4.26
-(K = sigma Delta v), eq. 5.5 and eqs. 1.6/1.7 (gravitational focusing); spec/velocities.md §6.
+(K = sigma Delta v), eq. 5.5 and eqs. 1.6/1.7 (gravitational focusing).
 """
 
 from __future__ import annotations
@@ -38,7 +38,8 @@ def dv2_min(dtype) -> float:
         dtype: floating dtype of the computation (float64: 1.49e-154; float32: 1.08e-19).
 
     Returns:
-        DV2_MIN as a Python float. References: spec/velocities.md §8.6 (focusing floor).
+        DV2_MIN as a Python float. References: velocity hazard 6 in
+        docs/design_notes.md (focusing floor).
     """
     return float(jnp.finfo(dtype).tiny) ** 0.5
 
@@ -58,7 +59,7 @@ def cross_section(a1, a2):
     Returns:
         sigma [cm^2].
 
-    References: Ormel (2008) thesis ch. 4 footnote 6, ch. 2 §2.2; spec/velocities.md §6.
+    References: Ormel (2008) thesis ch. 4 footnote 6, ch. 2 §2.2.
     """
     a1 = _check(a1, "a1", positive=True, hint="pass particle radii in cm")
     a2 = _check(a2, "a2", positive=True, hint="pass particle radii in cm")
@@ -79,7 +80,7 @@ def escape_velocity2(m1, m2, a1, a2):
     Returns:
         v_esc^2 [cm^2 s^-2].
 
-    References: Ormel (2008) thesis eq. 5.5 (and eqs. 1.6/1.7); spec/velocities.md §6.
+    References: Ormel (2008) thesis eq. 5.5 (and eqs. 1.6/1.7).
     """
     m1, m2, a1, a2 = _check_bodies(m1, m2, a1, a2)
     return _v_esc2(m1, m2, a1, a2)
@@ -132,7 +133,7 @@ def focusing_factor(m1, m2, a1, a2, dv2, *, dv_floor=0.0):
         1 + v_esc^2/Delta v^2 [-].
 
     References: Ormel (2008) thesis eq. 5.5 (Safronov focusing; eqs. 1.6/1.7);
-    spec/velocities.md §6, §8.6, check #33.
+    velocity hazard 6 in docs/design_notes.md.
     """
     m1, m2, a1, a2 = _check_bodies(m1, m2, a1, a2)
     dv2, dv_floor = _check_dv(dv2, dv_floor)
@@ -176,7 +177,8 @@ def kernel_sigma_dv(a1, a2, m1, m2, dv2, *, focusing=False, dv_floor=0.0):
         K [cm^3 s^-1].
 
     References: Ormel (2008) thesis eq. 4.26 (K = sigma Delta v), eq. 5.5 (focusing),
-    ch. 4 footnote 6 (sigma); spec/velocities.md §6, §8.1, §8.6.
+    ch. 4 footnote 6 (sigma); velocity hazards 1, 6 in
+    docs/design_notes.md.
     """
     _focusing_ok(focusing)
     a1 = _check(a1, "a1", positive=True, hint="pass particle radii in cm")

@@ -3,7 +3,8 @@
 All functions are pure and broadcasting; every material constant enters as a power law, so
 they are smooth in (gamma, E*, R, xi_crit) and safe under ``jit``/``vmap``/``grad``.
 
-Conventions (spec/collisions.md §2):
+Conventions (Wada et al. 2007 eqs. 1-6, 22, 44-45; Ormel 2008 thesis eqs. 1.27-1.31, 2.10, 4.12,
+6.18; T = thesis, W = Wada, errata in docs/design_notes.md):
     R        = r1 r2/(r1+r2)                     reduced monomer radius (= a0/2 identical)
     1/E*     = (1-nu1^2)/E1 + (1-nu2^2)/E2       reduced modulus        [W, T§1.2.2 erratum]
     r_contact= (9 pi gamma R^2/E*)^(1/3)         JKR equilibrium contact radius [W1, T1.29]
@@ -11,7 +12,7 @@ Conventions (spec/collisions.md §2):
     F_c      = 3 pi gamma R                      pull-off force [W5]
     E_break  = A_br gamma^(5/3) R^(4/3) E*^(-2/3)     [T4.12a, T6.18a; W45 with A_br = 37.066]
     rolling energy: four named conventions (``e_roll_dt``, ``e_roll_wada``, ``e_roll_force``,
-    ``e_roll_a``), see spec §2.2.
+    ``e_roll_a``): thesis eqs. 2.10, 4.12b, 6.18b, Tab. 4.3; Wada eqs. 22, 44.
 
 The thesis errata are applied: E*^2 (not E*^4) inside T1.30's cube root; the missing pi of
 T1.31; (1-nu^2) instead of (1-nu)^2 in T§1.2.2; A_br(DT) = 43, not T-Tab4.3's 9.6.
@@ -62,7 +63,7 @@ _chk = check  # check() validates Python constants eagerly, also inside jit
 
 
 # ---------------------------------------------------------------------------------------------
-# Material-independent JKR constants [W6, W45; spec §2.1, DER]
+# Material-independent JKR constants [W6, W45; DER]
 # U_n/(F_c delta_c) = 4 6^(1/3) [(4/5)x^5 - (4/3)x^(7/2) + (1/3)x^2], x = a/r_contact.
 # U_n(x_sep = 6^(-2/3)) = 4/45 and U_n(x = 1) = -(4/5) 6^(1/3), so
 C_BREAK = 4.0 / 45.0 + 0.8 * 6.0 ** (1.0 / 3.0)  # = 1.542585 (E_break / (F_c delta_c))
@@ -108,7 +109,7 @@ def reduced_modulus(young1, poisson1, young2=None, poisson2=None):
         E* [dyn cm^-2].
 
     References: Wada et al. 2007 §2.1; Ormel 2008 thesis §1.2.2 with the (1-nu)^2 -> (1-nu^2)
-    erratum (spec/collisions.md §12 item 3).
+    erratum (erratum 3 in docs/design_notes.md).
     """
     young1 = _chk(young1, "young1", positive=True, hint="Young's modulus is in dyn/cm^2 (1 GPa = 1e10)")
     poisson1 = _chk(poisson1, "poisson1", nonnegative=True)
@@ -185,7 +186,7 @@ def e_break_jkr(gamma, R, E_star):
 
     Arguments: gamma [erg cm^-2], R: reduced radius [cm], E_star [dyn cm^-2].
     Returns: E_break [erg]; identical to ``e_break(..., A_br=A_BR_WADA)``.
-    References: Wada et al. 2007 eq. 45 (constant derived from eq. 6, spec §2.1).
+    References: Wada et al. 2007 eq. 45 (constant derived from eq. 6).
     """
     return C_BREAK * pull_off_force(gamma, R) * jkr_delta_c(gamma, R, E_star)
 

@@ -2,8 +2,9 @@
 
 Pairwise functions come in two forms: ``dv_*`` (a speed, >= 0) and ``dv2_*`` (its square).
 Velocity components add in quadrature (thesis ch. 4 §4.3), so kernels use the ``dv2_*``
-forms, sum them, and take ONE safe sqrt of the total (spec/velocities.md §6, §8.1). Pairwise
-drift squares are computed as squares of differences, never with ``abs`` (spec §8.5 item 5).
+forms, sum them, and take ONE safe sqrt of the total (velocity hazard 1 in docs/design_notes.md).
+Pairwise drift squares are computed as squares of differences, never with ``abs`` (velocity
+hazard 5, item 5).
 
 Thesis physics (on by default in a disk scene): Brownian motion (eqs. 2.1, 4.4, 1.23) and
 radial drift (eq. 4.8). Optional: collective-effects radial drift (eq. 4.28; Nakagawa et al.
@@ -22,7 +23,8 @@ signature and a leading underscore:
     _v_radial_drift_collective, _v_azimuthal_drift, _dv2_azimuthal_drift,
     _v_settling, _dv2_settling
 
-References: Ormel (2008) PhD thesis; spec/velocities.md §3, §5, §8.
+References: Ormel (2008) PhD thesis eqs. 1.23-1.25, 2.1, 4.4, 4.8, 4.28; velocity hazards in
+docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -94,7 +96,7 @@ def _log_dv2_brownian_from_log_mass(logm1, logm2, T):
 
     ln(8 k_B T/pi) + logaddexp(-ln m1, -ln m2): overflow-free for any mass (also beyond
     1e308 g) and with exact gradients in ln m (the linear forms lose them to underflow of
-    1/m^2 for m >~ 1e154 g). References: thesis eqs. 2.1, 4.4; spec/velocities.md §3.
+    1/m^2 for m >~ 1e154 g). References: thesis eqs. 2.1, 4.4.
     """
     return jnp.log((8.0 * C.k_B / jnp.pi) * T) + jnp.logaddexp(-logm1, -logm2)
 
@@ -111,7 +113,7 @@ def dv_brownian(m1, m2, T):
 
     Delta v_BM = sqrt(8 k_B T / (pi m_mu)), m_mu = m1 m2/(m1 + m2), evaluated as
     sqrt(8 k_B T/pi) * sqrt(1/m1 + 1/m2) so that m1 m2 is never formed (finite for masses up
-    to ~1e308 g; spec §3). For equal porous aggregates it equals the eq. 4.22a form
+    to ~1e308 g; velocity hazard 6). For equal porous aggregates it equals the eq. 4.22a form
     (2/pi) sqrt(3 k_B T/rho_s) a^-3/2 phi^-1/2.
 
     Arguments:
@@ -121,7 +123,7 @@ def dv_brownian(m1, m2, T):
     Returns:
         Delta v_BM [cm s^-1].
 
-    References: Ormel (2008) thesis eqs. 1.23, 2.1, 4.4, 4.22a; spec/velocities.md §3, check #32.
+    References: Ormel (2008) thesis eqs. 1.23, 2.1, 4.4, 4.22a.
     """
     return _dv_brownian(*_check_brownian(m1, m2, T))
 
@@ -138,7 +140,7 @@ def dv2_brownian(m1, m2, T):
     Returns:
         Delta v_BM^2 [cm^2 s^-2].
 
-    References: Ormel (2008) thesis eqs. 2.1, 4.4 and §4.3 (quadrature sum); spec/velocities.md §3, §6.
+    References: Ormel (2008) thesis eqs. 2.1, 4.4 and §4.3 (quadrature sum).
     """
     return _dv2_brownian(*_check_brownian(m1, m2, T))
 
@@ -165,7 +167,7 @@ def v_radial_drift(st, eta, v_K):
     Returns:
         v_rd [cm s^-1] (<= 0 for eta > 0).
 
-    References: Ormel (2008) thesis eq. 4.8 (magnitude eq. 1.25); spec/velocities.md §5, check #31.
+    References: Ormel (2008) thesis eq. 4.8 (magnitude eq. 1.25).
     """
     st = _check(st, "st", nonnegative=True, hint=_ST_HINT)
     eta = _check(eta, "eta", hint="eta is the radial pressure-gradient parameter (GasState.eta)")
@@ -193,7 +195,8 @@ def dv2_radial_drift(st1, st2, eta, v_K):
     Returns:
         Delta v_r^2 [cm^2 s^-2].
 
-    References: Ormel (2008) thesis eq. 4.8 and §4.3 (quadrature); spec/velocities.md §5, §8.5.
+    References: Ormel (2008) thesis eq. 4.8 and §4.3 (quadrature); velocity hazard 5
+    (docs/design_notes.md).
     """
     st1 = _check(st1, "st1", nonnegative=True, hint=_ST_HINT)
     st2 = _check(st2, "st2", nonnegative=True, hint=_ST_HINT)
@@ -227,7 +230,7 @@ def v_radial_drift_collective(st, eta, v_K, eps_dust):
     Returns:
         v_rd [cm s^-1].
 
-    References: Ormel (2008) thesis eq. 4.28 (Nakagawa et al. 1986); spec/velocities.md §5.
+    References: Ormel (2008) thesis eq. 4.28 (Nakagawa et al. 1986).
     """
     st = _check(st, "st", nonnegative=True, hint=_ST_HINT)
     eta = _check(eta, "eta", hint="eta is the radial pressure-gradient parameter (GasState.eta)")
@@ -262,7 +265,8 @@ def v_azimuthal_drift(st, eta, v_K):
     Returns:
         v_phi - v_K [cm s^-1].
 
-    References: [EXT] Weidenschilling (1977a); Nakagawa et al. (1986); spec/velocities.md §5.
+    References: [EXT] Weidenschilling (1977a); Nakagawa et al. (1986) (steady state of the
+    single-particle equations behind thesis eq. 4.8).
     """
     st = _check(st, "st", nonnegative=True, hint=_ST_HINT)
     eta = _check(eta, "eta", hint="eta is the radial pressure-gradient parameter (GasState.eta)")
@@ -290,7 +294,7 @@ def dv2_azimuthal_drift(st1, st2, eta, v_K):
     Returns:
         Delta v_phi^2 [cm^2 s^-2].
 
-    References: [EXT] Weidenschilling (1977a); spec/velocities.md §5.
+    References: [EXT] Weidenschilling (1977a); thesis eq. 1.24 (gas lag eta v_K).
     """
     st1 = _check(st1, "st1", nonnegative=True, hint=_ST_HINT)
     st2 = _check(st2, "st2", nonnegative=True, hint=_ST_HINT)
@@ -330,7 +334,7 @@ def v_settling(st, z, Omega):
     Returns:
         v_z [cm s^-1] (towards the midplane: negative for z > 0).
 
-    References: Ormel (2008) thesis ch. 1 §1.2.1 (St << 1 limit); [EXT] cap; spec/velocities.md §5.
+    References: Ormel (2008) thesis ch. 1 §1.2.1 (St << 1 limit); [EXT] cap.
     """
     st = _check(st, "st", nonnegative=True, hint=_ST_HINT)
     z = _check(z, "z", hint="pass the height above the midplane in cm")
@@ -361,7 +365,7 @@ def dv2_settling(st1, st2, z, Omega):
     Returns:
         Delta v_z^2 [cm^2 s^-2].
 
-    References: Ormel (2008) thesis ch. 1 §1.2.1; [EXT] cap; spec/velocities.md §5.
+    References: Ormel (2008) thesis ch. 1 §1.2.1; [EXT] cap.
     """
     st1 = _check(st1, "st1", nonnegative=True, hint=_ST_HINT)
     st2 = _check(st2, "st2", nonnegative=True, hint=_ST_HINT)

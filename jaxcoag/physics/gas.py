@@ -4,7 +4,8 @@ Everything a velocity or drag formula needs is precomputed once into a :class:`G
 (an ``equinox.Module`` whose fields are all float arrays, so it can be jitted, vmapped and
 differentiated with respect to e.g. ``alpha``, ``rho_g`` or ``T``).
 
-References (Ormel 2008 thesis; spec/velocities.md §1, §7):
+References (Ormel 2008 thesis eqs. 1.13-1.18, 2.2-2.3, 4.2-4.3, 4.7, 6.1-6.14; conventions and
+thesis typos in docs/design_notes.md):
     c_g = sqrt(k_B T / (mu m_H))                        eq. 1.13
     Omega = sqrt(G M_* / R^3), H_g = c_g / Omega        eq. 1.15
     rho_g(z) = Sigma_g / (sqrt(2 pi) H_g) exp(-z^2/2H^2) eq. 1.14
@@ -98,7 +99,7 @@ class GasState(eqx.Module):
 
     @property
     def Re_eff(self):
-        """max(Re, 1): with Re <= 1 there is no inertial range (spec §1.1 guard)."""
+        """max(Re, 1): with Re <= 1 there is no inertial range (guard)."""
         return jnp.maximum(self.Re, 1.0)
 
 
@@ -108,7 +109,7 @@ def _vg_factor(vg_convention: str) -> float:
     if vg_convention == "sqrt(alpha)*c":
         return 1.0
     raise JaxcoagInputError(
-        f"unknown vg_convention {vg_convention!r}; use one of {VG_CONVENTIONS} (spec/velocities.md §0.2)"
+        f"unknown vg_convention {vg_convention!r}; use one of {VG_CONVENTIONS} (Ormel 2008 thesis eq. 2.3b vs §3.3.3)"
     )
 
 
@@ -135,11 +136,11 @@ def midplane_state(rho_g, T, alpha, Omega, *, R=None, M_star=C.M_sun, dlnP_dlnR=
         R: radius [cm]; default: from Omega and M_star (R = (G M_*/Omega^2)^(1/3)).
         M_star: stellar mass [g].
         dlnP_dlnR: midplane pressure gradient; None uses the approximation eta = (c_g/v_K)^2.
-        mu, sigma_mol, tL_factor, nu_m_divisor, vg_convention: conventions of spec §0.2.
+        mu, sigma_mol, tL_factor, nu_m_divisor, vg_convention: the gas conventions of docs/design_notes.md.
         z: height [cm] (recorded only; rho_g is taken as given at that height).
 
     Returns:
-        GasState. References: thesis eqs. 1.13-1.18, 2.2-2.3, 4.2-4.3, 4.7 (spec §1).
+        GasState. References: thesis eqs. 1.13-1.18, 2.2-2.3, 4.2-4.3, 4.7.
     """
     rho_g = check(rho_g, "rho_g", positive=True, hint="pass the gas density in g cm^-3")
     T = check(T, "T", positive=True, hint="pass the gas temperature in K")
@@ -184,14 +185,14 @@ def midplane_state(rho_g, T, alpha, Omega, *, R=None, M_star=C.M_sun, dlnP_dlnR=
 def local_state(R, M_star, Sigma_g, T, alpha, z=0.0, *, dlnP_dlnR=None, mu=C.mu_gas,
                 sigma_mol=C.sigma_mol, tL_factor=1.0, nu_m_divisor=2.0,
                 vg_convention="sqrt(1.5*alpha)*c") -> GasState:
-    """Local disk state from (R, M_*, Sigma_g, T, alpha, z) (spec §1.1, §12).
+    """Local disk state from (R, M_*, Sigma_g, T, alpha, z) (thesis eqs. 1.13-1.18, 4.2-4.3).
 
     Arguments:
         R: heliocentric radius [cm]; M_star: stellar mass [g]; Sigma_g: gas surface density
         [g cm^-2]; T: temperature [K]; alpha: turbulence parameter [-]; z: height [cm].
         dlnP_dlnR: midplane dlnP/dlnR for the exact eta (eq. 4.7); None gives eta ~ (c_g/v_K)^2.
         mu, sigma_mol, tL_factor (1 = t_L = 1/Omega; 2 pi = ch. 2 legacy), nu_m_divisor (2),
-        vg_convention: spec §0.2.
+        vg_convention: gas convention 2 in docs/design_notes.md.
 
     Returns:
         GasState with rho_g(z) = Sigma_g/(sqrt(2 pi) H_g) exp(-z^2/(2 H_g^2)) (eq. 1.14).
@@ -218,7 +219,7 @@ def _power_law_disk(R, Sigma1, p, T1, q, alpha, z, M_star, **kw) -> GasState:
 
 
 def mmsn_hayashi81(R, alpha=1e-4, z=0.0, *, M_star=C.M_sun, **kw) -> GasState:
-    """Hayashi (1981) minimum-mass solar nebula (thesis ch. 1, ch. 2 §2.2.1; spec §1.3).
+    """Hayashi (1981) minimum-mass solar nebula (thesis ch. 1, ch. 2 §2.2.1).
 
     Sigma_g = 1700 (R/AU)^-3/2 g cm^-2, T = 280 (R/AU)^-1/2 K, M_* = M_sun, exact eta
     (dlnP/dlnR = -13/4).
@@ -227,7 +228,7 @@ def mmsn_hayashi81(R, alpha=1e-4, z=0.0, *, M_star=C.M_sun, **kw) -> GasState:
 
 
 def ch4_disk(R, alpha=1e-4, z=0.0, *, rho_X=1.0, M_star=C.M_sun, **kw) -> GasState:
-    """Chapter-4 disk (thesis Table 4.1, after Takeuchi & Lin 2002; spec §1.3, typo #16).
+    """Chapter-4 disk (thesis Table 4.1, after Takeuchi & Lin 2002; thesis typo #16).
 
     Sigma_g = 353.5 rho_X (R/AU)^-1 g cm^-2, T = 280 (R/AU)^-1/2 K, t_L = 1/Omega, exact eta
     (dlnP/dlnR = -11/4). ``rho_X`` is the ch. 4 gas-density enhancement factor.
@@ -237,7 +238,7 @@ def ch4_disk(R, alpha=1e-4, z=0.0, *, rho_X=1.0, M_star=C.M_sun, **kw) -> GasSta
 
 
 def molecular_cloud(n, T=10.0, *, mu=C.mu_gas, sigma_mol=C.sigma_mol, nu_m_divisor=3.0) -> GasState:
-    """Homogeneous Jeans-mass molecular-cloud core (thesis ch. 6 §6.2; spec §7).
+    """Homogeneous Jeans-mass molecular-cloud core (thesis ch. 6 §6.2, eqs. 6.1-6.14).
 
     Arguments:
         n: gas number density [cm^-3] (thesis: 1e3..1e7).
@@ -272,7 +273,7 @@ def molecular_cloud(n, T=10.0, *, mu=C.mu_gas, sigma_mol=C.sigma_mol, nu_m_divis
 
 
 def jeans_quantities(gas: GasState):
-    """Cloud diagnostics (spec §7): dict with L_J [cm], M_J [g], t_cross [s], t_ff [s]."""
+    """Cloud diagnostics (thesis eqs. 6.1, 6.5-6.7): dict with L_J [cm], M_J [g], t_cross [s], t_ff [s]."""
     rho = gas.rho_g
     L_J = 0.5 * jnp.sqrt(jnp.pi * gas.c_g ** 2 / (C.G * rho))
     return dict(L_J=L_J, M_J=4 * jnp.pi / 3 * rho * L_J ** 3, t_cross=L_J / gas.c_g,

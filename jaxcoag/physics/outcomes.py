@@ -1,7 +1,7 @@
 """Collision outcomes shared by the binned and Monte Carlo engines (pure physics, cgs).
 
-One interface (:class:`Outcome`, spec/collisions.md §9.1) describes what a pair (1, 2) turns
-into, vectorised over any pair grid:
+One interface (:class:`Outcome`; "Collision-outcome interface" in docs/design_notes.md) describes
+what a pair (1, 2) turns into, vectorised over any pair grid:
 
 * with probability ``1 - p_two`` one large remnant of mass M_L = (1 - f_pwl) M_tot and
   enlargement factor ``psi_one``;
@@ -23,7 +23,8 @@ Also here: fragment power-law integrals and a mass-exact sampler (thesis eqs. 6.
 the thesis ch. 4 bounce ingredients (lens area, f_comp), and Wada et al. 2007's fitted laws.
 
 References: Ormel 2008 thesis chs. 2, 4, 5, 6 (Tab. 1.1, 6.1); Dominik & Tielens 1997;
-Wada et al. 2007 (ApJ 661, 320) §5; spec/collisions.md §3, §4, §5, §7, §8, §9.
+Wada et al. 2007 (ApJ 661, 320) §5, eqs. 51-59; Birnstiel, Dullemond & Brauer (2010) (binned
+fragment redistribution); errata: docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -91,7 +92,7 @@ class Outcome(eqx.Module):
     Mass bookkeeping (exact for every recipe in this module, see :meth:`expected_mass`):
     (1 - p_two) M_L + p_two (split M_L + (1 - split) M_L) + f_pwl M_tot = M_tot.
 
-    References: spec/collisions.md §9.1.
+    References: the collision-outcome interface in docs/design_notes.md.
     """
 
     eff: jax.Array
@@ -165,7 +166,7 @@ def soft_clip01(t, width: float = 0.0):
 
     Arguments: t [-]; width: static Python float (in units of t).
     Returns: value in [0, 1].
-    References: spec/collisions.md §9.3 (smooth replacements of clamps).
+    References: smooth regime switches in docs/design_notes.md (smooth replacements of clamps).
     """
     t = jnp.asarray(t)
     if width == 0.0:
@@ -185,7 +186,8 @@ def psi_fragment(n, c_f=1.0):
 
     Arguments: n: monomer number [-] (> 0); c_f: prefactor [-] (1, [CHOICE]: not printed).
     Returns: psi [-] (>= 1).
-    References: Ormel 2008 thesis Fig. 6.2 (phi ∝ N^-0.33); spec/collisions.md §6.5.
+    References: Ormel 2008 thesis Fig. 6.2 (phi ∝ N^-0.33); erratum 18 (c_f) in
+    docs/design_notes.md.
     """
     n = jnp.asarray(n)
     return 1.0 / jnp.minimum(1.0, c_f * jnp.maximum(n, 1.0) ** -0.33)
@@ -199,7 +201,7 @@ class AbstractFragModel(eqx.Module):
     ``__call__(m1, m2, energy, n_tot, e_break, m0, width)`` with masses [g], energy [erg],
     n_tot = (m1+m2)/m0 [-], e_break [erg] (per contact), m0 [g], width static.
 
-    References: spec/collisions.md §7 (FragModel catalogue), §9.1.
+    References: Ormel 2008 thesis §5.3.4, §6.3, Tab. 1.1; Wada et al. 2007 §5.5.
     """
 
     @abc.abstractmethod
@@ -223,7 +225,8 @@ def dt_fragment_fraction(energy, n_c, e_break, *, eps_ero=3.0, eps_cat=10.0, wid
 
     With e = E/(n_c E_break): 0 below eps_ero (no mass loss); rises linearly in ln E to 0.5
     at eps_cat (Wada's catastrophic-disruption definition N_large/N_tot = 0.5); then linearly
-    in ln E to 1 at 3 eps_cat; 1 above (continuous) [CHOICE, spec §7].
+    in ln E to 1 at 3 eps_cat; 1 above (continuous) [CHOICE: a parametric
+    bridge between the Dominik & Tielens (1997) / Wada et al. (2007) thresholds].
 
     Arguments:
         energy: collision energy [erg] (>= 0).
@@ -236,7 +239,7 @@ def dt_fragment_fraction(energy, n_c, e_break, *, eps_ero=3.0, eps_cat=10.0, wid
         f_pwl in [0, 1].
 
     References: Dominik & Tielens 1997; Wada et al. 2007 §5.5, Tab. 1; Ormel 2008 thesis
-    Tab. 1.1, 6.1; spec/collisions.md §3, §7 (DTEnergy).
+    Tab. 1.1, 6.1; Wada et al. 2007 §5.5.
     """
     le = safe_log(energy, fill=-1e3) - jnp.log(n_c * e_break)
     l_ero = jnp.log(eps_ero)
@@ -261,7 +264,7 @@ def dt_thresholds(n_c, e_roll, e_break, *, restr_factor=5.0, eps_ero=3.0, eps_ca
         ``erosion`` = eps_ero n_c E_break, ``catastrophic`` = eps_cat n_c E_break.
 
     References: Dominik & Tielens 1997; Wada et al. 2007 Tab. 1, §5.5; Ormel 2008 thesis
-    Tabs. 1.1, 6.1; spec/collisions.md §3.
+    Tabs. 1.1, 6.1.
     """
     return dict(restructuring=restr_factor * e_roll, max_compression=n_c * e_roll,
                 erosion=eps_ero * n_c * e_break, catastrophic=eps_cat * n_c * e_break)
@@ -277,7 +280,7 @@ class DTEnergy(AbstractFragModel):
     Fields: eps_ero (3), eps_cat (10), q_frag (-2.0), m_hi_frac (0.25) float leaves;
     contacts: static, "N" (n_c = N, thesis ch. 2) or "wada" (n_k = N - 2).
 
-    References: Wada et al. 2007 §5.5; Ormel 2008 thesis Tab. 1.1; spec/collisions.md §7.
+    References: Wada et al. 2007 §5.5; Ormel 2008 thesis Tab. 1.1.
     """
 
     eps_ero: jax.Array = eqx.field(default=3.0, converter=jnp.asarray)
@@ -306,7 +309,7 @@ class ShatterAtMass(AbstractFragModel):
     mass m0 (m_lo = m_hi = m0).
 
     Fields: m_frag [g] (float leaf).
-    References: Ormel 2008 thesis §5.3.4 (Figs. 5.8, 5.9); spec/collisions.md §7.
+    References: Ormel 2008 thesis §5.3.4 (Figs. 5.8, 5.9; Ormel & Spaans 2008).
     """
 
     m_frag: jax.Array = eqx.field(converter=jnp.asarray)
@@ -324,7 +327,7 @@ class BounceWhenCompact(eqx.Module):
     and E > N E_roll (T-Tab1.1 links compaction + bouncing to E ≈ N_c E_roll). Off by default.
 
     Fields: psi_max [-] (float leaf; e.g. 1/0.33).
-    References: Ormel 2008 thesis Tab. 1.1, §6.6.1; spec/collisions.md §7 (Bouncing).
+    References: Ormel 2008 thesis Tab. 1.1, §6.6.1.
     """
 
     psi_max: jax.Array = eqx.field(default=1.0 / 0.33, converter=jnp.asarray)
@@ -344,7 +347,7 @@ def sticking_outcome(m1, m2, psi, m0):
 
     Arguments: m1, m2 [g]; psi [-] of the product; m0: monomer mass [g] (fragment range).
     Returns: :class:`Outcome` with p_two = f_pwl = 0, eff = 1.
-    References: spec/collisions.md §9.1.
+    References: the collision-outcome interface in docs/design_notes.md.
     """
     return Outcome.build(m_lo=m0, m_hi=m0, psi_one=psi, aux=dict(m_tot=m1 + m2))
 
@@ -355,7 +358,7 @@ def bounce_outcome(m1, psi1, m2, psi2, m0, *, psi1_after=None, psi2_after=None):
     Arguments: m1, m2 [g]; psi1, psi2 [-]; m0 [g]; psi1_after, psi2_after: optional
     post-bounce enlargement factors (e.g. compacted), default unchanged.
     Returns: :class:`Outcome` with p_two = 1, f_pwl = 0.
-    References: Ormel 2008 thesis §4.2.3 (the only explicit bounce rule); spec §7, §9.1.
+    References: Ormel 2008 thesis §4.2.3 (the only explicit bounce rule).
     """
     split = 1.0 / (1.0 + m2 / m1)
     pa = psi1 if psi1_after is None else psi1_after
@@ -374,7 +377,8 @@ def mix_outcomes(w, a: Outcome, b: Outcome, m1, m2) -> Outcome:
 
     Arguments: w: weight of b in [0, 1]; a, b: outcomes; m1, m2: masses [g].
     Returns: :class:`Outcome`.
-    References: spec/collisions.md §9.3 ("mixing outcomes linearly in expected mode").
+    References: smooth regime switches in docs/design_notes.md (outcomes mixed linearly in
+    expected mode).
     """
     w = jnp.asarray(w)
     ra, rb = a.remnant_masses(m1, m2), b.remnant_masses(m1, m2)
@@ -436,7 +440,7 @@ def o07_outcome(m1, psi1, m2, psi2, dv, mat: Material, *, delta=DELTA_CCA, B=1.0
         ``w_bounce``.
 
     References: Ormel 2008 thesis eqs. 2.9, 2.13-2.19 and fn. 7, Tab. 1.1; Dominik &
-    Tielens 1997; Wada et al. 2007 §5.5; spec/collisions.md §4, §7.
+    Tielens 1997; Wada et al. 2007 §5.5; errata 5, 6, 20 in docs/design_notes.md.
     """
     if validate:
         m1 = _chk(m1, "m1", positive=True, hint="masses are in grams")
@@ -490,7 +494,8 @@ def lens_area(a1, a2, b):
 
     Arguments: a1, a2: radii [cm] (> 0); b: impact parameter [cm] (>= 0).
     Returns: A [cm^2] (T4.17 as printed is twice this: erratum 10).
-    References: Ormel 2008 thesis eq. 4.17 (corrected); spec/collisions.md §5 item 3.
+    References: Ormel 2008 thesis eq. 4.17 (corrected: erratum 10 in
+    docs/design_notes.md).
     """
     a1 = _chk(a1, "a1", positive=True)
     a2 = _chk(a2, "a2", positive=True)
@@ -536,7 +541,7 @@ class Compound(eqx.Module):
 
     Fields: m: total mass [g]; f_d: dust mass fraction [-]; f_p: porous fraction of the dust
     [-]; phi_pd: filling factor of the porous dust phase [-].
-    References: Ormel 2008 thesis Tab. 4.2, eq. 4.19; spec/collisions.md §1.5.
+    References: Ormel 2008 thesis Tab. 4.2, eq. 4.19.
     """
 
     m: jax.Array = eqx.field(converter=jnp.asarray)
@@ -585,7 +590,8 @@ def o08_outcome(c1: Compound, c2: Compound, dv, b, mat: Material, *, fgeo_mode: 
         split = m1/M, f_pwl = 0, psi = V/V* with V* the compact-material volume) and the
         product compounds. aux: f_comp, F_av, V_one [cm^3].
 
-    References: Ormel 2008 thesis §4.2.3-4.2.4, eqs. 4.16-4.18, 4.25; spec/collisions.md §5.
+    References: Ormel 2008 thesis §4.2.3-4.2.4, eqs. 4.16-4.18, 4.25 (Ormel,
+    Cuzzi & Tielens 2008); erratum 19 in docs/design_notes.md.
     """
     m1, m2 = _chk(c1.m, "c1.m", positive=True), _chk(c2.m, "c2.m", positive=True)
     dv = _chk(dv, "dv", nonnegative=True, hint="relative velocity in cm/s")
@@ -630,7 +636,7 @@ def o08_outcome(c1: Compound, c2: Compound, dv, b, mat: Material, *, fgeo_mode: 
 
 
 # ---------------------------------------------------------------------------------------------
-# fragment power law (thesis eqs. 6.29-6.30; spec §6.6)
+# fragment power law (thesis eqs. 6.29-6.30)
 def _expm1_over_x(x):
     small = jnp.abs(x) < 1e-6
     xs = jnp.where(small, 1.0, x)
@@ -652,7 +658,8 @@ def powerlaw_mass_fraction(q, m_lo, m_hi, m_a, m_b):
 
     Arguments: q [-]; m_lo < m_hi [g]; m_a <= m_b [g] (bin edges). All broadcast.
     Returns: mass fraction [-]; e.g. q = -2, [1, 10] of [1, 250] -> 0.41702.
-    References: Ormel 2008 thesis eq. 6.29; spec/collisions.md §6.6 (binned equivalent).
+    References: Ormel 2008 thesis eq. 6.29 (the binned equivalent integrates
+    m^(q+1) over each bin).
     """
     a = jnp.clip(m_a, m_lo, m_hi)
     b = jnp.clip(m_b, m_lo, m_hi)
@@ -666,7 +673,7 @@ def mean_fragment_mass(q, m_lo, m_hi):
 
     Arguments: q [-]; m_lo <= m_hi [g] (m_lo = m_hi returns m_lo).
     Returns: mean mass [g]; the number of fragments per unit M_pwl is its inverse.
-    References: spec/collisions.md §6.6 (q = -2 with m in [1, 250] -> 5.5436).
+    References: Ormel 2008 thesis eqs. 6.29-6.30 (q = -2 with m in [1, 250] -> 5.5436).
     """
     m_lo = jnp.asarray(m_lo)
     m_hi = jnp.asarray(m_hi)
@@ -693,7 +700,7 @@ def sample_fragment_masses(key, q, m_lo, m_hi, M_pwl, capacity: int):
         (masses, mult): arrays (capacity,) [g] and [-]; sum(masses * mult) == M_pwl to
         rounding; unused slots have mult = 0.
 
-    References: Ormel 2008 thesis eqs. 6.29-6.30; spec/collisions.md §6.6.
+    References: Ormel 2008 thesis eqs. 6.29-6.30.
     """
     r = jax.random.uniform(key, (capacity,), dtype=jnp.result_type(float))
     s = q + 1.0

@@ -5,7 +5,7 @@ switch regime: the volume/mass ordering at V1 = V2 / m1 = m2, the compaction cli
 branch junction). Public functions validate their inputs (clear error, never a silent NaN);
 the ``_underscore`` twins skip validation for engine hot loops.
 
-Contents (spec/collisions.md §1, §4, §6.2):
+Contents (Ormel 2008 thesis ch. 2 §2.2, eqs. 2.4-2.25; ch. 6 eqs. 6.22, 6.24):
     geometry      a* = (3m/4 pi rho_s)^(1/3), a = a* psi^(1/3), A = pi a^2        [T2.6, T2.25]
     ch. 2 (O07)   hit-and-stick psi with psi_add (eqs. 2.13-2.15, 2.19),
                   compaction (eq. 2.17), the combined O07 switch, PCA/CCA limits   [T§2.2.3-4]
@@ -67,7 +67,7 @@ def smooth_step(x, width: float = 0.0):
     Returns:
         weight in [0, 1] (H(0) = 1: the threshold itself belongs to the upper regime).
 
-    References: spec/collisions.md §9.3.
+    References: smooth regime switches in docs/design_notes.md.
     """
     x = jnp.asarray(x)
     if width == 0.0:
@@ -126,7 +126,7 @@ def geometric_area(m, psi, rho_s):
 
     Arguments: m [g] (> 0); psi [-] (> 0); rho_s [g cm^-3] (> 0).
     Returns: A [cm^2].
-    References: Ormel 2008 thesis eqs. 2.4, 2.6 (spec/collisions.md §1.1).
+    References: Ormel 2008 thesis eqs. 2.4, 2.6, 2.25.
     """
     m = _chk(m, "m", positive=True)
     psi = _chk(psi, "psi", positive=True, hint="psi = V/V* is >= 1 (1 = compact)")
@@ -205,9 +205,9 @@ def psi_add(m1, psi1, m2, psi2, *, m0, B=1.0, mF_over_m0=10.0):
 
     Returns:
         psi_add [-]; symmetric under swapping the particles. Ordering by mass (b = heavier)
-        is the spec's resolution of the T2.11/T2.12 ambiguity (volume ordering can blow up).
+        is our resolution of the thesis eq. 2.11/2.12 ambiguity (volume ordering can blow up).
 
-    References: Ormel 2008 thesis eq. 2.19; spec/collisions.md §4 (erratum 5).
+    References: Ormel 2008 thesis eq. 2.19; erratum 5 in docs/design_notes.md.
     """
     m1, psi1, m2, psi2, m0 = _check_pair(m1, psi1, m2, psi2, m0)
     return _psi_add(m1, psi1, m2, psi2, m0, B, mF_over_m0)
@@ -239,7 +239,7 @@ def psi_hit_and_stick(m1, psi1, m2, psi2, *, m0, delta=DELTA_CCA, B=1.0, mF_over
 
     psi = <psi>_m (1 + x)^(3 delta/2 - 1) + psi_add, where x = V_s/V_b in (0, 1] is the volume
     ratio (V_i ∝ m_i psi_i, bracket ordered by VOLUME, eq. 2.12-2.13) and psi_add (eq. 2.19)
-    is ordered by MASS (spec/collisions.md §4 [CHOICE], erratum 5).
+    is ordered by MASS ([CHOICE], erratum 5 in docs/design_notes.md).
 
     Arguments:
         m1, m2: masses [g] (> 0), broadcasting.
@@ -263,7 +263,7 @@ def _compaction_fraction(energy, n, e_roll, width=0.0):
     x = energy / (n * e_roll)
     if width == 0.0:
         return jnp.clip(x, 0.0, 1.0)
-    # smooth min(x, 1): x/(1 + x^p)^(1/p), p = 1/width (spec §9.3); computed in log space
+    # smooth min(x, 1): x/(1 + x^p)^(1/p), p = 1/width (smooth switches, docs/design_notes.md); computed in log space
     p = 1.0 / width
     lx = safe_log(x, fill=-1e3)
     return jnp.where(x > 0, jnp.exp(lx - jnp.logaddexp(0.0, p * lx) / p), 0.0)
@@ -281,7 +281,8 @@ def compaction_fraction(energy, n, e_roll, *, width=0.0):
     Returns:
         f_C in [0, 1].
 
-    References: Ormel 2008 thesis §2.2.3 (Delta V_p/V_p = -E/(N E_roll)); spec §9.3.
+    References: Ormel 2008 thesis §2.2.3 (Delta V_p/V_p = -E/(N E_roll)); smooth switches in
+    docs/design_notes.md.
     """
     energy = _chk(energy, "energy", nonnegative=True, hint="collision energy in erg")
     n = _chk(n, "n", positive=True)
@@ -318,7 +319,7 @@ def psi_compaction(m1, psi1, m2, psi2, energy, *, e_roll, m0, psi_min=1.0, width
     Returns:
         psi of the product [-] (1, or the floor, when E >= N E_roll).
 
-    References: Ormel 2008 thesis eqs. 2.16-2.17; spec/collisions.md §4 item 3.
+    References: Ormel 2008 thesis eqs. 2.16-2.17.
     """
     m1, psi1, m2, psi2, m0 = _check_pair(m1, psi1, m2, psi2, m0)
     energy = _chk(energy, "energy", nonnegative=True, hint="collision energy in erg")
@@ -351,7 +352,8 @@ def psi_o07(m1, psi1, m2, psi2, energy, *, e_roll, m0, restr_factor=1.0, delta=D
     Returns:
         psi of the product [-].
 
-    References: Ormel 2008 thesis eqs. 2.13-2.19 and fn. 7; spec/collisions.md §4.
+    References: Ormel 2008 thesis eqs. 2.13-2.19 and fn. 7; errata 5, 6, 20 in
+    docs/design_notes.md.
     """
     m1, psi1, m2, psi2, m0 = _check_pair(m1, psi1, m2, psi2, m0)
     energy = _chk(energy, "energy", nonnegative=True, hint="collision energy in erg")
@@ -379,7 +381,7 @@ def psi_pca_limit(delta=DELTA_CCA, psi2=1.0, B=1.0, mF_over_m0=10.0):
 
     Arguments: delta [-]; psi2: monomer psi [-] (1); B [-]; mF_over_m0 [-].
     Returns: psi* [-] (14.974 for the ch. 2 defaults).
-    References: Ormel 2008 thesis eq. 2.18 and §2.2.4; spec/collisions.md §4 (limits).
+    References: Ormel 2008 thesis eq. 2.18 and §2.2.4 (PCA/CCA limits).
     """
     return 1.5 * delta * psi2 / (1.0 - B * jnp.exp(-1.0 / jnp.asarray(mF_over_m0)))
 
@@ -438,7 +440,7 @@ def void_volume_o09(V1, V2, N2, phi2, *, delta=DELTA_CCA, form="B"):
     Returns:
         V_void in monomer volumes [-].
 
-    References: Ormel 2008 thesis eq. 6.24; spec/collisions.md §6.2.
+    References: Ormel 2008 thesis eq. 6.24 (erratum 12 in docs/design_notes.md).
     """
     V1 = _chk(V1, "V1", positive=True)
     V2 = _chk(V2, "V2", positive=True)
@@ -471,7 +473,7 @@ def phi_hit_and_stick_o09(N1, phi1, N2, phi2, *, delta=DELTA_CCA, form="B"):
         phi of the product [-]; symmetric. Form B: CCA slope d ln phi/d ln N = -0.425,
         monomer PCA phi(1e5) = 0.152.
 
-    References: Ormel 2008 thesis eq. 6.24; spec/collisions.md §6.2.
+    References: Ormel 2008 thesis eq. 6.24 (erratum 12 in docs/design_notes.md).
     """
     N1 = _chk(N1, "N1", positive=True)
     N2 = _chk(N2, "N2", positive=True)
@@ -495,7 +497,7 @@ def _outer_radius_ratio(N, phi, width=0.0):
     if width == 0.0:
         l_ratio = jnp.where(lphi >= l_b, l_compact, l_fluffy)
     else:
-        # logistic blend of the two branches in ln phi (spec §1.4: ~ +-5 % of phi_b <-> width 0.02)
+        # logistic blend of the two branches in ln phi (~ +-5 % of phi_b <-> width 0.02) [CHOICE]
         s = 1.0 / (1.0 + jnp.exp(-(lphi - l_b) / width))
         l_ratio = s * l_compact + (1.0 - s) * l_fluffy
     l_ratio = jnp.maximum(l_ratio, 0.0)
@@ -518,7 +520,7 @@ def outer_radius_ratio(N, phi, *, width=0.0):
     Returns:
         a_out/a [-]; e.g. (1000, 0.05) -> 20.546, (1e6, 0.01) -> 2.20099.
 
-    References: Ormel 2008 thesis eq. 6.22 (log10, DER); spec/collisions.md §1.4.
+    References: Ormel 2008 thesis eq. 6.22 (log10, DER; §6.4.1).
     """
     N = _chk(N, "N", positive=True)
     phi = _chk(phi, "phi", positive=True, hint="phi = 1/psi is the filling factor, 0 < phi <= 1")

@@ -14,21 +14,22 @@ parameter b/b_max:
 
 Only two of the 72 tables are printed in the thesis (T-Tab6.7 global b=0 fpwl, T-Tab6.9 local
 b=0 fpwl); both ship here (:data:`TAB6_7`, :data:`TAB6_9`). :meth:`RecipeTables.from_cds`
-loads the full published set (CDS J/A+A/502/845 text format, one block per table headed
-``# GLOBAL, b=0.0, Q=fpwl``). :meth:`RecipeTables.surrogate` builds smooth surrogate tables
-from the thesis's verbal constraints; they are a [CHOICE], carry ``is_surrogate=True``, and
-any figure made with them must say so.
+loads the full published set (Ormel et al. 2009, CDS J/A+A/502/845, in the thesis App. 6.A
+layout: one table per block headed ``# GLOBAL, b=0.0, Q=fpwl``). :meth:`RecipeTables.surrogate`
+builds smooth surrogate tables from the thesis's verbal constraints; they are a [CHOICE], carry
+``is_surrogate=True``, and any figure made with them must say so.
 
 Interpolation (``expected`` mode, for gradients and binned engines) is multilinear in
 (eps | log eps, phi, b), clamped to the edge nodes. ``sample`` mode picks one node per axis
 with probability P(x1) = (x2 - x)/(x2 - x1) (erratum 14 fixed).
 
 References: Ormel 2008 thesis §6.3-6.4, eqs. 6.22-6.30, Tabs. 6.2, 6.3, 6.7-6.9, Fig. 6.7,
-App. 6.A; Ormel et al. 2009 (A&A 502, 845); spec/collisions.md §6.
+App. 6.A; Ormel et al. 2009 (A&A 502, 845); errata 12-18 in docs/design_notes.md.
 """
 
 from __future__ import annotations
 
+import gzip
 import pathlib
 import re
 
@@ -37,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._validate import JaxcoagInputError
 from .contact import Material
 from .outcomes import Outcome, mix_outcomes
 from .porosity import (_chk, _outer_radius_ratio, _phi_hit_and_stick_o09, _reduced_mass,
@@ -130,7 +132,7 @@ class RecipeTables(eqx.Module):
     Constructors: :meth:`surrogate` (no download needed; [CHOICE] surrogates that contain the
     printed T-Tab6.7/6.9), :meth:`from_cds` (the published tables).
 
-    References: Ormel 2008 thesis §6.3.9, App. 6.A; spec/collisions.md §6.3, §6.5.
+    References: Ormel 2008 thesis §6.3.9, App. 6.A, Tabs. 6.3, 6.7-6.9.
     """
 
     glob: RecipeTable
@@ -142,8 +144,9 @@ class RecipeTables(eqx.Module):
         """Smooth surrogate tables from the thesis's verbal constraints ([CHOICE], labelled).
 
         - fpwl: b = 0 equals the printed T-Tab6.7 (global) / T-Tab6.9 (local); for b > 0 it is
-          scaled down: at b = 0.75 to 25 % (most compact phi) ... 6 % (phi = 0.122), linearly
-          in phi and in b below 0.75, and by (1 - b)/0.25 above;
+          scaled down: at b = 0.75 to 25 % (the recipe's most compact phi column: 0.2505
+          global, 0.1610 local) ... 6 % (its least compact one: 0.1219 global, 0.0701 local),
+          linearly in phi and in b below 0.75, and by (1 - b)/0.25 above;
         - q: global b = 0 from -2.0 at eps <= 0.1 to -3.7 at eps >= 20 (linear in ln eps);
           offset impacts q = -2.0 + 0.4 b (shallower than -2); local from -1.3 to -2.0
           across the local eps range;
@@ -152,30 +155,54 @@ class RecipeTables(eqx.Module):
           max(1, 0.33/phi) at eps_roll = 1; 1 for b >= 0.75 above 1 m/s (eps >= 0.2288);
         - fmiss = 0.
 
-        References: Ormel 2008 thesis §6.3.3-6.3.8, Figs. 6.3-6.5; spec/collisions.md §6.5.
+        References: Ormel 2008 thesis §6.3.3-6.3.8, Figs. 6.3-6.5.
         """
         return cls(glob=_surrogate_table("global"), loc=_surrogate_table("local"), is_surrogate=True)
 
     @classmethod
     def from_cds(cls, path) -> "RecipeTables":
-        """Load the published tables (CDS J/A+A/502/845) from a file or a directory of files.
+        """Load the published tables (Ormel et al. 2009, CDS J/A+A/502/845) from a file or a directory.
 
-        Format: blocks headed ``# GLOBAL, b=0.0, Q=fpwl`` (recipe GLOBAL|LOCAL, b value,
-        Q in fmiss, Nf, Sf, fpwl, q, Csig); the first data row holds the column axis
-        (phi_ini, or a_out/a for fmiss) after a leading dummy entry; each following row is
-        eps then the values. All 72 blocks (2 x 6 x 6 b) must be present.
+        Format (thesis App. 6.A): 72 tables, each headed ``# GLOBAL, b=0.0, Q=fpwl`` (recipe
+        GLOBAL|LOCAL, case-insensitive; b/b_max; Q one of fmiss, Nf, Sf, fpwl, q, Csig, or the
+        CDS catalogue's names Nfk = Nf and Cphi = Csig). Inside a table:
 
-        Arguments: path: file or directory (every regular file inside is read).
+        - optional column-title lines that do not start with a number (the printed tables
+          carry ``ε  φ^ini``) are skipped;
+        - the first numeric row is the column axis (phi_ini, or a_out/a for fmiss), either
+          as printed (only the n_col axis values, the corner cell left blank) or with a
+          placeholder in the corner cell (as :meth:`to_text` writes it);
+        - every following row is eps (eps_roll for Csig) then the n_col values.
+
+        Fields may be separated by tabs or runs of blanks (fixed-width columns). Other lines
+        starting with ``#`` are comments. In a directory every regular file is read except the
+        catalogue's ``ReadMe`` (its byte-by-byte description is not table data); ``*.gz``
+        files are decompressed.
+
+        Arguments: path: file or directory.
         Returns: :class:`RecipeTables` with is_surrogate = False.
-        References: Ormel 2008 thesis App. 6.A.
+        Raises: JaxcoagInputError naming the table and line that does not fit the format.
+        References: Ormel 2008 thesis App. 6.A (Tabs. 6.7-6.9); Ormel et al. 2009, A&A 502, 845.
         """
         p = pathlib.Path(path)
-        files = sorted(f for f in p.iterdir() if f.is_file()) if p.is_dir() else [p]
+        if p.is_dir():
+            files = sorted(f for f in p.iterdir() if f.is_file() and not f.name.lower().startswith("readme"))
+        else:
+            files = [p]
         if not files:
-            raise FileNotFoundError(f"no table files found in {p}")
+            raise FileNotFoundError(f"no table files found in {p} (a CDS ReadMe alone holds no tables)")
         blocks = {}
         for f in files:
-            blocks.update(_parse_cds(f.read_text()))
+            raw = f.read_bytes()
+            if f.suffix == ".gz":
+                raw = gzip.decompress(raw)
+            new = _parse_cds(raw.decode("utf-8"), source=str(f))
+            twice = sorted(set(new) & set(blocks))
+            if twice:
+                r, bb, q = twice[0]
+                raise JaxcoagInputError(f"table {r}, b={bb:g}, Q={q} appears in more than one file (again in {f}); "
+                                        "keep one copy")
+            blocks.update(new)
         return cls(glob=_assemble(blocks, "GLOBAL"), loc=_assemble(blocks, "LOCAL"), is_surrogate=False)
 
     def to_text(self) -> str:
@@ -192,18 +219,47 @@ class RecipeTables(eqx.Module):
 
 
 _HEADER = re.compile(r"#\s*(GLOBAL|LOCAL)\s*,\s*b\s*=\s*([0-9.eE+-]+)\s*,\s*Q\s*=\s*(\w+)", re.I)
+# quantity keywords: thesis App. 6.A names, and the CDS catalogue's names (Nfk, Cphi)
+_QNAMES = {**{k.lower(): k for k in QUANTITIES}, "nfk": "Nf", "cphi": "Csig"}
 
 
-def _parse_cds(text):
+def _is_number(tok):
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
+def _parse_cds(text, source="<text>"):
+    """Tables of one text in the App. 6.A layout -> {(recipe, b, Q): (eps, col, values)}."""
     blocks, key, rows = {}, None, []
 
     def flush():
-        if key is not None:
-            if len(rows) < 2:
-                raise ValueError(f"table {key} has no data rows")
-            blocks[key] = np.array(rows, dtype=float)
+        if key is None:
+            return
+        where = f"table {key[0]}, b={key[1]:g}, Q={key[2]} in {source}"
+        if len(rows) < 2:
+            raise JaxcoagInputError(f"{where} has no data rows: after the header give the column-axis "
+                                    "row (phi_ini, or a_out/a for fmiss) and then rows of eps and values")
+        axis, data = rows[0][1], rows[1:]
+        n = len(data[0][1])
+        if n < 2:
+            raise JaxcoagInputError(f"{where}, line {data[0][0]}: a data row needs eps and at least one value")
+        for ln, r in data:
+            if len(r) != n:
+                raise JaxcoagInputError(f"{where}, line {ln}: {len(r)} numbers, but the first data row has "
+                                        f"{n} (eps and {n - 1} values); every row needs the same columns")
+        if len(axis) == n:  # placeholder in the corner cell
+            axis = axis[1:]
+        elif len(axis) != n - 1:
+            raise JaxcoagInputError(f"{where}, line {rows[0][0]}: the column-axis row has {len(axis)} numbers "
+                                    f"but the data rows have {n - 1} values; give the {n - 1} axis values "
+                                    "(optionally after a corner placeholder)")
+        d = np.array([r for _, r in data], dtype=float)
+        blocks[key] = (d[:, 0], np.array(axis, dtype=float), d[:, 1:])
 
-    for line in text.splitlines():
+    for ln, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if not s:
             continue
@@ -211,16 +267,28 @@ def _parse_cds(text):
         if m:
             flush()
             q = m.group(3)
-            qn = {k.lower(): k for k in QUANTITIES}.get(q.lower())
+            qn = _QNAMES.get(q.lower())
             if qn is None:
-                raise ValueError(f"unknown quantity {q!r} in header {s!r}; expected one of {QUANTITIES}")
+                raise JaxcoagInputError(f"unknown quantity {q!r} in header {s!r} ({source}, line {ln}); expected "
+                                        f"one of {QUANTITIES} (CDS names Nfk, Cphi also accepted)")
             key, rows = (m.group(1).upper(), round(float(m.group(2)), 6), qn), []
-        elif s.startswith("#"):
+            if key in blocks:
+                raise JaxcoagInputError(f"table {key[0]}, b={key[1]:g}, Q={qn} appears twice ({source}, line {ln}); "
+                                        "keep one copy")
             continue
-        else:
-            if key is None:
-                raise ValueError(f"data before any '# GLOBAL|LOCAL, b=..., Q=...' header: {s!r}")
-            rows.append([float(x) for x in s.split()])
+        if s.startswith("#"):
+            continue
+        toks = s.split()
+        if not _is_number(toks[0]):
+            continue  # column-title line of the printed layout (e.g. "ε  φ^ini")
+        if key is None:
+            raise JaxcoagInputError(f"numbers before any '# GLOBAL|LOCAL, b=..., Q=...' header ({source}, "
+                                    f"line {ln}): {s!r}; every table starts with such a header")
+        bad = [t for t in toks if not _is_number(t)]
+        if bad:
+            raise JaxcoagInputError(f"table {key[0]}, b={key[1]:g}, Q={key[2]} ({source}, line {ln}): "
+                                    f"{bad[0]!r} is not a number; a table row holds numbers only")
+        rows.append((ln, [float(t) for t in toks]))
     flush()
     return blocks
 
@@ -228,25 +296,29 @@ def _parse_cds(text):
 def _assemble(blocks, recipe):
     bs = sorted({k[1] for k in blocks if k[0] == recipe})
     if not bs:
-        raise ValueError(f"no {recipe} tables found")
+        raise JaxcoagInputError(f"no {recipe} tables found; the file(s) need '# {recipe}, b=..., Q=...' tables")
     eps, col, vals = [], [], []
     for q in QUANTITIES:
         per_b = []
         for b in bs:
             arr = blocks.get((recipe, b, q))
             if arr is None:
-                raise ValueError(f"missing table {recipe}, b={b}, Q={q}")
+                raise JaxcoagInputError(f"missing table {recipe}, b={b}, Q={q}; all 72 tables (2 recipes x 6 "
+                                        "quantities x the same b values) are needed")
             per_b.append(arr)
-        e0, c0 = per_b[0][1:, 0], per_b[0][0, 1:]
-        for arr in per_b:
-            if not (np.array_equal(arr[1:, 0], e0) and np.array_equal(arr[0, 1:], c0)):
-                raise ValueError(f"{recipe} Q={q}: eps/phi axes differ between b values")
+        e0, c0 = per_b[0][0], per_b[0][1]
+        for e, c, _ in per_b:
+            if not (np.array_equal(e, e0) and np.array_equal(c, c0)):
+                raise JaxcoagInputError(f"{recipe} Q={q}: eps/phi axes differ between b values; every b "
+                                        "table of one quantity must use the same eps and phi_ini nodes")
+        if np.any(np.diff(e0) <= 0) or np.any(np.diff(c0) <= 0):
+            raise JaxcoagInputError(f"{recipe} Q={q}: the eps column and the axis row must increase")
         eps.append(e0)
         col.append(c0)
-        vals.append(np.stack([a[1:, 1:] for a in per_b]))
+        vals.append(np.stack([v for _, _, v in per_b]))
     shapes = {v.shape for v in vals}
     if len(shapes) != 1:
-        raise ValueError(f"{recipe}: quantities have different grid shapes {shapes}")
+        raise JaxcoagInputError(f"{recipe}: quantities have different grid shapes {shapes}")
     return RecipeTable(eps=jnp.asarray(np.stack(eps)), col=jnp.asarray(np.stack(col)),
                        b=jnp.asarray(np.array(bs)), values=jnp.asarray(np.stack(vals)))
 
@@ -262,7 +334,9 @@ def _surrogate_table(recipe):
     Ph = phi[None, None, :] * np.ones((nb, ne, nc))
     # fpwl
     base = np.array(TAB6_7 if glob else TAB6_9, dtype=float)[None] * np.ones((nb, 1, 1))
-    f75 = np.interp(Ph, [GLOBAL_PHI[0], GLOBAL_PHI[-1]], [0.06, 0.25])
+    # b = 0.75 scale: 6 % at the table's least compact phi column, 25 % at its most compact one
+    # (each recipe on its own phi grid: 0.122..0.251 global, 0.070..0.161 local)
+    f75 = np.interp(Ph, [phi[0], phi[-1]], [0.06, 0.25])
     scale = np.where(Bg <= 0.75, 1.0 - (1.0 - f75) * Bg / 0.75, f75 * (1.0 - Bg) / 0.25)
     fpwl = base * scale
     # q
@@ -299,7 +373,7 @@ def interp_weights(grid, x, log: bool = False):
 
     Arguments: grid: (n,) increasing [-]; x: query (any shape); log: static.
     Returns: (i int array, w float array) of x's shape.
-    References: Ormel 2008 thesis §6.4.1, Fig. 6.7; spec/collisions.md §6.4.
+    References: Ormel 2008 thesis §6.4.1, Fig. 6.7 (erratum 14 in docs/design_notes.md).
     """
     g = jnp.log(grid) if log else jnp.asarray(grid)
     xx = safe_log(x, fill=-1e300) if log else jnp.asarray(x)
@@ -338,7 +412,7 @@ def interpolate(table: RecipeTable, quantity: str, eps, col, b, *, log_eps: bool
     Returns:
         interpolated values [-] (the table's units; local fpwl in units of m_mu).
 
-    References: Ormel 2008 thesis §6.4.1; spec/collisions.md §6.4.
+    References: Ormel 2008 thesis §6.4.1.
     """
     iq = _Q[quantity]
     eps, col, b = jnp.broadcast_arrays(jnp.asarray(eps, float), jnp.asarray(col, float), jnp.asarray(b, float))
@@ -382,7 +456,7 @@ def b_average_weights(b_nodes=B_GRID):
 
     Uses the same piecewise-linear interpolation in b as :func:`interpolate` (clamped above
     the last node). Arguments: b_nodes: increasing (n_b,) [-]. Returns: (n_b,) weights, sum 1.
-    References: spec/collisions.md §6 (b_frac = None: expected mode over p(b) ∝ b).
+    References: Ormel 2008 thesis §6.3-6.5 (b_frac = None: expected mode over p(b) ∝ b).
     """
     return _b_weights(jnp.asarray(b_nodes, dtype=float))
 
@@ -419,7 +493,7 @@ def o09_outcome(m1, psi1, m2, psi2, dv, tables: RecipeTables, mat: Material, *, 
     Returns:
         :class:`Outcome`; aux: energy [erg], w_hs, w_glob (regime weights), is_surrogate.
 
-    References: Ormel 2008 thesis §6.3-6.5, eqs. 6.17-6.30; spec/collisions.md §6.
+    References: Ormel 2008 thesis §6.3-6.5, eqs. 6.17-6.30; errata 12-18 in docs/design_notes.md.
     """
     if validate:
         m1 = _chk(m1, "m1", positive=True, hint="masses are in grams")

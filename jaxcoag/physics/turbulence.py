@@ -6,21 +6,21 @@ inputs (float64 by default; float32 works where noted). Stokes numbers, Reynolds
 returned velocities-squared are dimensionless: velocities are in units of the rms turbulent gas
 velocity v_g (thesis eq. 3.2), times are in units of the large-eddy turnover time t_L.
 
-Layers (spec/velocities.md §8.7):
+Layers (velocity hazard 7 in docs/design_notes.md):
 
 * per particle: :func:`st_star` -- St*_i = clip(y* min(St, 1), Re^-1/2, 1) (exact root of eq. 3.21
   by fixed-count Newton with an implicit-function (custom_jvp) derivative, or the "ya" / "ch03" closed
   forms);
 * per pair: :func:`dv2_terms_oc07` -- (Delta v_I^2, Delta v_II^2)/v_g^2 from PRECOMPUTED St*_i in the
-  bounded-factor forms of spec §4.3 (an N x N kernel needs N root solves, not N^2);
+  bounded-factor forms of eqs. 3.15a/b (an N x N kernel needs N root solves, not N^2);
 * total: :func:`dv2_turbulent_oc07` (square, internal/hot path, unvalidated) and the public, validated
   :func:`dv_turbulent_oc07` (one double-where ``safe_sqrt`` of the total).
 
 Exact-root derivative: the root y*(RHS) of F(y) = RHS (eq. 3.18d/3.21) is a ``jax.custom_jvp`` whose
 tangent is RHS_dot / F'(y*), with y* itself the (differentiable) custom_jvp output. Differentiating
 that rule again yields -F''(y*) (dy*/dRHS)^2 / F'(y*), so first AND higher derivatives (Hessians) are
-the exact implicit-function values (spec §8.4 option ii); the Newton iterations are never
-differentiated.
+the exact implicit-function values (velocity hazard 4, docs/design_notes.md); the Newton
+iterations are never differentiated.
 
 The array kernels are wrapped in ``jax.jit`` (static: ``method``, ``accurate``, ``newton_iters``), so
 eager calls compile once per shape/dtype and nested use inside a user's jit costs nothing extra.
@@ -28,7 +28,7 @@ Measured: a 200 x 200 Delta v/v_g matrix from 200 per-particle St* solves takes 
 (jit, after warm-up; 2 shared cores), ~7x faster than solving St* per pair.
 
 References: Ormel & Cuzzi 2007, A&A 466, 413 (= Ormel 2008 thesis ch. 3, eqs. 3.5, 3.14-3.35);
-Weidenschilling 1984 (thesis eqs. 2.5a/b); spec/velocities.md §4, §8, §9, §10.
+Weidenschilling 1984 (thesis eqs. 2.5a/b); numerical hazards: docs/design_notes.md.
 """
 
 from __future__ import annotations
@@ -91,7 +91,8 @@ def _float_arrays(*xs):
 
 
 def _r_of_re(reynolds):
-    """r = Re_eff^-1/2 with Re_eff = max(Re, 1) (spec §1.1 guard)."""
+    """r = Re_eff^-1/2 with Re_eff = max(Re, 1) (guard: Re <= 1 has no
+    inertial range, so r = 1)."""
     return 1.0 / jnp.sqrt(jnp.maximum(reynolds, 1.0))
 
 
@@ -106,7 +107,7 @@ def F_ystar(y):
         y: y* = t*/tau_f [-], y >= 0.
     Returns:
         F(y) [-]; F(0) = -1, F(1) = -1/2, strictly increasing on y > 0.
-    References: Ormel & Cuzzi 2007 eq. 3.18d (thesis eqs. 3.18d, 3.19); spec §4.2.
+    References: Ormel & Cuzzi 2007 eq. 3.18d (thesis eqs. 3.18d, 3.19).
     """
     y = jnp.asarray(y)
     return (2.0 / 3.0) * y * (y - 1.0) ** 2 - 1.0 / (1.0 + y)
@@ -119,7 +120,7 @@ def dF_ystar(y):
         y: y* [-].
     Returns:
         dF/dy [-].
-    References: thesis eq. 3.18d; spec §8.4.
+    References: thesis eq. 3.18d; velocity hazard 4 (docs/design_notes.md).
     """
     y = jnp.asarray(y)
     return (2.0 / 3.0) * (y - 1.0) * (3.0 * y - 1.0) + 1.0 / (1.0 + y) ** 2
@@ -132,7 +133,7 @@ def d2F_ystar(y):
         y: y* [-].
     Returns:
         d^2F/dy^2 [-].
-    References: thesis eq. 3.18d; spec §8.4.
+    References: thesis eq. 3.18d; velocity hazard 4 (docs/design_notes.md).
     """
     y = jnp.asarray(y)
     return 4.0 * y - 8.0 / 3.0 - 2.0 / (1.0 + y) ** 3
@@ -149,7 +150,7 @@ def rhs_eq321(st, beta_over_alpha=0.0):
         beta_over_alpha: ch.3 pressure parameter ratio beta/alpha [-] (default 0, as in the thesis).
     Returns:
         RHS [-].
-    References: thesis eqs. 3.19-3.21; spec §4.2(a), §4.5.
+    References: thesis eqs. 3.19-3.21 (thesis §3.3.3).
     """
     st, boa = _float_arrays(st, beta_over_alpha)
     f = st / (1.0 + st)
@@ -158,8 +159,8 @@ def rhs_eq321(st, beta_over_alpha=0.0):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _root_of_rhs(rhs, newton_iters):
-    # Upper bracket y0 (spec §8.4): F(y) >= (2/3)(y-1)^3 - 1/2 for y >= 1 and F convex there,
-    # so Newton from the right converges monotonically without overshoot.
+    # Upper bracket y0 (velocity hazard 4, docs/design_notes.md): F(y) >= (2/3)(y-1)^3 - 1/2
+    # for y >= 1 and F convex there, so Newton from the right converges monotonically without overshoot.
     y = 1.0 + (1.5 * jnp.maximum(rhs, 0.0) + 0.75) ** (1.0 / 3.0)
 
     def step(_, y):
@@ -190,7 +191,7 @@ def ystar_exact(st, *, beta_over_alpha=0.0, newton_iters: int = 8):
         newton_iters: number of Newton steps (static int).
     Returns:
         y* [-] (1 <= y* <= 1.6004 for beta/alpha = 0).
-    References: thesis eqs. 3.18d, 3.21; spec §4.2(a), §8.4.
+    References: thesis eqs. 3.18d, 3.21; velocity hazard 4 (docs/design_notes.md).
     """
     return _ystar_impl(st, beta_over_alpha, int(newton_iters))
 
@@ -221,7 +222,8 @@ def st_star(st, reynolds, *, method: str = "exact", beta_over_alpha=0.0, ya=1.6,
         newton_iters: Newton steps for "exact" (static int).
     Returns:
         St*_i [-], broadcast shape of the inputs.
-    References: thesis eqs. 3.12, 3.18d-3.21, App. 3.A (CH03); spec §4.2, §8.4, §8.7.
+    References: thesis eqs. 3.12, 3.18d-3.21, App. 3.A (CH03: Cuzzi & Hogan 2003);
+    velocity hazards 4, 7 (docs/design_notes.md).
     """
     _check_method(method)
     return _st_star_impl(st, reynolds, beta_over_alpha, ya, method, int(newton_iters))
@@ -296,7 +298,7 @@ def I_h(y):
         y: upper limit [-], y >= 0.
     Returns:
         I_h(y) [-].
-    References: thesis eq. 3.31a (App. 3.A); spec §4.6, §8.6.
+    References: thesis eq. 3.31a (App. 3.A); velocity hazard 6 (docs/design_notes.md).
     """
     (y,) = _float_arrays(y)
     return y * y * safe_sqrt(y) * _Ph(y)
@@ -313,7 +315,7 @@ def I_g(y):
         y: upper limit [-], y >= 0.
     Returns:
         I_g(y) [-].
-    References: thesis eq. 3.31b (App. 3.A); spec §4.6, §8.6.
+    References: thesis eq. 3.31b (App. 3.A); velocity hazard 6 (docs/design_notes.md).
     """
     (y,) = _float_arrays(y)
     return y * y * y * _Pg(y)
@@ -342,7 +344,7 @@ def _fast_eddy_bracket(st, s, r):
 def dv2_terms_oc07(st1, st2, sstar1, sstar2, reynolds, *, accurate: bool = False):
     """Class-I and class-II contributions (Delta v_I^2, Delta v_II^2)/v_g^2 from precomputed St*_i.
 
-    Bounded-factor forms of spec §4.3 (algebraically identical to eqs. 3.15a/b, without their
+    Bounded-factor forms of eqs. 3.15a/b (algebraically identical to eqs. 3.15a/b, without their
     catastrophic cancellation or overflowing products), with s = max(St*_1, St*_2), r = Re_eff^-1/2,
     m = min(St_1, St_2), M = max(St_1, St_2):
 
@@ -354,6 +356,17 @@ def dv2_terms_oc07(st1, st2, sstar1, sstar2, reynolds, *, accurate: bool = False
     St*_i = r), plus the g = h = 1 piece of the smaller-St* particle between t*_2 and t*_1.
     Hot path (ODE right-hand sides, MC loops): NO validation; St_i must be > 0 (use ``clamp_st``).
 
+    Regime boundary t*_12 = t_s (a slope break, not a jump): s is clipped at r because
+    t_s <= t*_12 (thesis text after eqs. 3.12 and 3.15b), so dvII2 = 0 (tightly coupled, eq. 3.23)
+    up to the St_k where y*(St_k) St_k = r (t_1 = t_s/y*, thesis §3.3.4), and the class-II
+    integral of eq. 3.14 over [t_s, t*_12] opens linearly above it. Delta v is continuous there; its
+    derivative d(Delta v^2/v_g^2)/dSt_1 jumps by (dSt*/dSt) [2 - 2 (St_1 K_1^2 + St_2 K_2^2)/(St_1 + St_2)],
+    K_i = St_i/(St_i + r) (d eq. 3.14/dt*_12 at t_s). The break is in the exact integral form eq. 3.13,
+    for every t* method and for ``accurate=True``. On a coarse mass grid it reads as a step: in the
+    default ``jaxcoag run`` scene Delta v_tot against a 1 um monomer goes 11.46 -> 16.13 cm/s from the
+    bin at 6.70e-6 g to the one at 9.31e-6 g (boundary at 6.83e-6 g; "OC07 regime boundary" in
+    docs/design_notes.md, figure docs/velocity_jump.png).
+
     Arguments:
         st1, st2: Stokes numbers [-], > 0.
         sstar1, sstar2: per-particle St*_i from :func:`st_star` (same Re) [-].
@@ -361,7 +374,8 @@ def dv2_terms_oc07(st1, st2, sstar1, sstar2, reynolds, *, accurate: bool = False
         accurate: static; use the App. 3.A class-II form.
     Returns:
         (dvI2, dvII2): both >= 0, in units of v_g^2, exactly symmetric in (1, 2).
-    References: thesis eqs. 3.12, 3.14, 3.15a/b, 3.27-3.32; spec §4.3, §4.6, §8.3, §8.6.
+    References: thesis eqs. 3.12, 3.14, 3.15a/b, 3.27-3.32; velocity hazards 3, 6
+    (docs/design_notes.md).
     """
     return _dv2_terms_impl(st1, st2, sstar1, sstar2, reynolds, bool(accurate))
 
@@ -409,7 +423,7 @@ def dv2_turbulent_oc07(st1, st2, reynolds, *, method: str = "exact", beta_over_a
         ya: y_a for method "ya" [-].
     Returns:
         Delta v^2/v_g^2 [-], >= 0.
-    References: thesis eqs. 3.14-3.15 (+ App. 3.A); spec §8.7.
+    References: thesis eqs. 3.14-3.15 (+ App. 3.A); velocity hazard 7 (docs/design_notes.md).
     """
     _check_method(method)
     return _dv2_turbulent_impl(st1, st2, reynolds, beta_over_alpha, ya, method, bool(accurate))
@@ -443,7 +457,8 @@ def dv_turbulent_oc07(st1, st2, reynolds, *, method: str = "exact", beta_over_al
         accurate: use the App. 3.A class-II form (eq. 3.32) instead of eq. 3.15b.
     Returns:
         Delta v_12/v_g [-]; multiply by v_g = sqrt(3/2) alpha^1/2 c_g [cm/s].
-    References: Ormel & Cuzzi 2007 A&A 466, 413; thesis eqs. 3.12-3.15, 3.21, 3.32; spec §4, §8.7.
+    References: Ormel & Cuzzi 2007 A&A 466, 413; thesis eqs. 3.12-3.15, 3.21, 3.32;
+    velocity hazard 7 (docs/design_notes.md).
     """
     _check_method(method)
     hint_st = "Stokes numbers tau_f/t_L must be positive; for St -> 0 pass a tiny value (>= 1e-30)"
@@ -466,14 +481,15 @@ def vp2_oc07(st, reynolds):
     """Particle rms velocity squared v_p^2/v_g^2 (eq. 3.5), stable form.
 
     v_p^2/v_g^2 = r + (1 - r)(1 + r St/(St + r))/(St + 1), r = Re_eff^-1/2 (no cancellation or overflow).
-    Tends to r as St -> inf (normalisation artefact of eq. 3.5, spec typo #4).
+    Tends to r as St -> inf (normalisation artefact of eq. 3.5, thesis typo #4 in
+    docs/design_notes.md).
 
     Arguments:
         st: Stokes number [-], >= 0.
         reynolds: turbulent Reynolds number [-].
     Returns:
         v_p^2/v_g^2 [-].
-    References: thesis eq. 3.5; spec §4.7.
+    References: thesis eq. 3.5.
     """
     st, re = _float_arrays(st, reynolds)
     r = _r_of_re(re)
@@ -485,14 +501,14 @@ def vpg2_oc07(st, reynolds):
     """Particle-gas rms relative velocity squared v_pg^2/v_g^2 (eq. 4.9), bounded form.
 
     v_pg^2/v_g^2 = (1 - r) (St/(St + 1)) (St/(St + r)) = St^2 (Re^1/2 - 1)/((St + 1)(St Re^1/2 + 1)).
-    v_pg^2 + v_p^2 = v_g^2 (spec typo #2).
+    v_pg^2 + v_p^2 = v_g^2 (thesis typo #2, docs/design_notes.md).
 
     Arguments:
         st: Stokes number [-], >= 0.
         reynolds: turbulent Reynolds number [-].
     Returns:
         v_pg^2/v_g^2 [-].
-    References: thesis eq. 4.9 (and §3.2 with typo #2 corrected); spec §4.7.
+    References: thesis eq. 4.9 (and §3.2 with typo #2 corrected).
     """
     st, re = _float_arrays(st, reynolds)
     r = _r_of_re(re)
@@ -512,7 +528,7 @@ def vp2_oc07_accurate(st, reynolds, *, method: str = "exact", beta_over_alpha=0.
         method, beta_over_alpha, ya: t* prescription, as in :func:`st_star`.
     Returns:
         v_p,acc^2/v_g^2 [-].
-    References: thesis eqs. 3.11, 3.27-3.31; spec §4.6.
+    References: thesis eqs. 3.11, 3.27-3.31 (App. 3.A).
     """
     _check_method(method)
     return _vp2_acc_impl(st, reynolds, beta_over_alpha, ya, method)
@@ -542,7 +558,7 @@ def dv2_tightly_coupled_eq323(st1, st2, reynolds):
         reynolds: turbulent Reynolds number [-].
     Returns:
         Delta v^2/v_g^2 [-].
-    References: thesis eq. 3.23; spec §4.4.
+    References: thesis eq. 3.23.
     """
     a, b, re = _float_arrays(st1, st2, reynolds)
     r = _r_of_re(re)
@@ -559,7 +575,7 @@ def dv2_small_eq324(st1, st2, reynolds):
         reynolds: turbulent Reynolds number [-] (Re_eff = max(Re, 1)).
     Returns:
         Delta v^2/v_g^2 [-].
-    References: thesis eq. 3.24; spec §4.4.
+    References: thesis eq. 3.24.
     """
     a, b, re = _float_arrays(st1, st2, reynolds)
     r = _r_of_re(re)
@@ -577,7 +593,7 @@ def dv2_intermediate_eq325(st1, eps, ya=1.6):
         ya: y_a [-] (1.6 as in the thesis; exact root 1.60036880372).
     Returns:
         Delta v^2/v_g^2 [-].
-    References: thesis eq. 3.25 (App. 3.B); spec §4.4.
+    References: thesis eq. 3.25 (App. 3.B).
     """
     st1, eps, ya = _float_arrays(st1, eps, ya)
     return (2.0 * ya - (1.0 + eps)
@@ -593,7 +609,8 @@ def dv2_II_intermediate_eq334(st1, eps, ya=1.6):
         ya: y_a [-].
     Returns:
         Delta v_II^2/v_g^2 [-].
-    References: thesis eq. 3.34 with the sign typo corrected (-(1 + eps); spec typo #7).
+    References: thesis eq. 3.34 with the sign typo corrected (-(1 + eps); thesis typo #7,
+    docs/design_notes.md).
     """
     st1, eps, ya = _float_arrays(st1, eps, ya)
     return (2.0 * ya - (1.0 + eps) + 1.0 / (1.0 + ya) + eps ** 2 / (eps + ya)) * st1
@@ -608,7 +625,7 @@ def dv2_I_intermediate_eq335(st1, eps, ya=1.6):
         ya: y_a [-].
     Returns:
         Delta v_I^2/v_g^2 [-].
-    References: thesis eq. 3.35; spec §4.4.
+    References: thesis eq. 3.35 (App. 3.B).
     """
     st1, eps, ya = _float_arrays(st1, eps, ya)
     return ((1.0 - eps) / (1.0 + eps)) * (1.0 / (ya + 1.0) - eps ** 2 / (ya + eps)) * st1
@@ -625,7 +642,7 @@ def dv2_heavy_eq326(st1, st2, reynolds=None):
         reynolds: optional turbulent Reynolds number [-] (None: Re^-1/2 terms dropped, as eq. 3.26).
     Returns:
         Delta v^2/v_g^2 [-].
-    References: thesis eqs. 3.26, 3.15b; spec §4.4.
+    References: thesis eqs. 3.26, 3.15b.
     """
     if reynolds is None:
         a, b = _float_arrays(st1, st2)
@@ -645,7 +662,7 @@ def st_where_star_is_one_eq322(beta_over_alpha):
         beta_over_alpha: beta/alpha [-], >= 0.
     Returns:
         St [-] (1 for beta/alpha = 0; 0.670440 for beta/alpha = 1).
-    References: thesis eq. 3.22; spec §4.2.
+    References: thesis eq. 3.22.
     """
     (boa,) = _float_arrays(beta_over_alpha)
     return (1.0 + jnp.sqrt(1.5 * boa)) ** -0.5
@@ -671,7 +688,7 @@ def dv_turbulent_w84(tau1, tau2, t_s, t_L, v_s, v_L):
         v_s, v_L: smallest / largest eddy velocities [cm/s].
     Returns:
         Delta v [cm/s].
-    References: Weidenschilling 1984; thesis eqs. 2.5a/b and footnote 4; spec §4.8.
+    References: Weidenschilling 1984; thesis eqs. 2.5a/b and footnote 4 (ch. 2).
     """
     t1, t2, ts, tL, vs, vL = _float_arrays(tau1, tau2, t_s, t_L, v_s, v_L)
     hi = jnp.maximum(t1, t2)
