@@ -177,7 +177,7 @@ def main(argv=None):
     a0 = cfg["dust"]["a0"]
     m0 = 4.0 / 3.0 * math.pi * hand.rho_s * a0 ** 3          # monomer partner [g]
     r = float(gas.Re_eff) ** -0.5
-    ck = _common.Checks("velocity regimes of the default scene (issue 12.6)")
+    ck = _common.Checks("velocity regimes of the default scene")
     ck.add("Re (library vs hand)", float(gas.Re), hand.Re, 1e-12)
 
     # -- locate the boundary in the library: bisection in ln m on St*_1(m) > r --------------------

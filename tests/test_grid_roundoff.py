@@ -1,4 +1,4 @@
-"""Branches decided on grid masses are decided exactly, not by round-off (issue 12, point 2).
+"""Branches decided on grid masses are decided exactly, not by round-off.
 
 Grid log-centres/edges carry a round-off of a few ulp of |ln m|, so masses that coincide
 mathematically (two centres exactly a factor 10 apart on a 7-per-decade grid, a monomer mass on a

@@ -28,7 +28,8 @@ def _invariants(res):
 
 def test_capacity_exhaustion_flags_and_conserves():
     """U12: forcing Ns > S triggers the emergency merge and the CAPACITY flag, never corruption."""
-    res = mc.run(K.Constant(1.0), n_particles=300, key=jax.random.key(3), **SMALL)
+    with pytest.warns(mc.CapacityWarning, match=r"capacity = 24"):
+        res = mc.run(K.Constant(1.0), n_particles=300, key=jax.random.key(3), **SMALL)
     assert int(res.status) & mc.STATUS.CAPACITY
     assert int(res.n_merge) > 0
     _invariants(res)
@@ -99,8 +100,9 @@ def test_equal_mass_scheduled_merge_keeps_capacity():
     m2 = np.asarray(res.moments(2.0))
     np.testing.assert_allclose(np.log(m2[:3]), [0.0, 1.0, 3.0], atol=0.6)
     # the same run with S = 20 cannot merge (all species protected): flagged, still consistent
-    res20 = mc.run(K.Sum(0.5), n_particles=1e30, key=jax.random.key(8), t_out=jnp.array([0.0, 1.0, 3.0, 5.0]),
-                   grouping="equal_mass", ns_target=16, capacity=20, f_eps=1e-2)
+    with pytest.warns(mc.CapacityWarning, match=r"capacity = 20"):
+        res20 = mc.run(K.Sum(0.5), n_particles=1e30, key=jax.random.key(8), t_out=jnp.array([0.0, 1.0, 3.0, 5.0]),
+                       grouping="equal_mass", ns_target=16, capacity=20, f_eps=1e-2)
     assert int(res20.status) & mc.STATUS.CAPACITY
     _invariants(res20)
     lmass = jax.nn.logsumexp(jnp.where(res20.valid, res20.log_g + res20.logm, -jnp.inf), axis=-1)

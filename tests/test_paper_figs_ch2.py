@@ -51,7 +51,7 @@ def test_fig2_quick(tmp_path):
     a_rain = 1e-4 * float(gz.c_g) * float(gz.rho_g) / (omega * 3.0)  # quartz rho_s = 3
     assert 1.0 <= C["a"] / a_rain <= 3 ** (1 / 3)
     assert 0.9 <= (P["a"] / P["psi"]) / a_rain <= 1.45
-    # the zoom mass comes from a run, not from the published <psi> (issue 12 point 7): the pilot's <psi>_m at
+    # the zoom mass comes from a run, not from the published <psi>: the pilot's <psi>_m at
     # the first rain-out reproduces the published 86 within 0.7-1.4x (measured 80.7 -> 83.0 over its two
     # passes; 9 single runs at Ns* = 16 gave 78-98, sd 7.6 = 9 %, so the band is about +-4 sd)
     pl = res["pilots"]["R1Ta4-P"]
