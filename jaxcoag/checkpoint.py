@@ -209,7 +209,7 @@ def integrate(model, grid, y0, ts, *, scheme, fragmentation=None, solver=None, r
 
     References: module docstring; docs/design_notes.md (solver traps).
     """
-    from .binned import BinnedSolution, RESULTS
+    from .binned import BinnedSolution, result_code, result_from_code
 
     ts = np.asarray(ts, np.float64)
     if ts.ndim != 1 or ts.size < 2 or not np.all(np.diff(ts) > 0):
@@ -247,7 +247,7 @@ def integrate(model, grid, y0, ts, *, scheme, fragmentation=None, solver=None, r
             w0 = time.perf_counter()
             y1, res, st = step(y, ts[k], ts[k + 1])
             y1 = jax.block_until_ready(y1)
-            c = int(np.asarray(res._value))
+            c = int(np.asarray(result_code(res)))
             walls.append(time.perf_counter() - w0)
             steps.append(int(st["steps"]))
             rejected.append(int(st["rejected"]))
@@ -285,11 +285,7 @@ def integrate(model, grid, y0, ts, *, scheme, fragmentation=None, solver=None, r
     gel = jax.vmap(lambda v: scheme.gel_mass(v, grid))(Y)
     M0 = scheme.total_mass(Y[0], grid)
     drift = (jnp.sum(rho, axis=1) + gel - M0) / M0
-    result = RESULTS.successful
-    if code != 0:
-        for name in RESULTS._name_to_item:
-            if int(np.asarray(getattr(RESULTS, name)._value)) == code:
-                result = getattr(RESULTS, name)
+    result = result_from_code(code)
     stats = {"steps": jnp.asarray(int(np.sum(steps))), "rejected": jnp.asarray(int(np.sum(rejected))),
              "num_steps": jnp.asarray(int(np.sum(steps) + np.sum(rejected)))}
     sol = BinnedSolution(ts=jnp.asarray(ts[:n]), ys=Y, mass_per_bin=rho, number_per_bin=num, gel_mass=gel,

@@ -52,13 +52,9 @@ def _xr():
 
 def result_table():
     """Mapping RESULTS index (int) -> (name, message) for :class:`jaxcoag.binned.RESULTS`."""
-    from .binned import RESULTS
+    from .binned import RESULT_NAMES, RESULTS
 
-    out = {}
-    for name, item in RESULTS._name_to_item.items():
-        code = int(np.asarray(item._value))
-        out[code] = (name, RESULTS._index_to_message[code])
-    return out
+    return {code: (name, RESULTS[getattr(RESULTS, name)]) for code, name in enumerate(RESULT_NAMES)}
 
 
 def _attr_value(v):
@@ -140,7 +136,9 @@ def to_xarray(solution, *, attrs=None, kernel=None):
     if attrs is not None and not isinstance(attrs, dict):
         raise JaxcoagInputError("attrs must be a dict of str -> value (scene name, parameters).")
     grid = solution.grid
-    code = int(np.asarray(solution.result._value))
+    from .binned import result_code
+
+    code = int(np.asarray(result_code(solution.result)))
     name, message = result_table()[code]
     stats = solution.stats
     ds = xr.Dataset(

@@ -307,8 +307,9 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
         checkpoint = None  # nothing was written
     sol = seg.solution
     rows = summary_rows(sol, built.kernel)
+    from .binned import result_code
     from .io import result_table
-    rname = result_table()[int(np.asarray(sol.result._value))][0]
+    rname = result_table()[int(np.asarray(result_code(sol.result)))][0]
     numbers = dict(m_peak=rows[-1]["m_peak"], a_peak=rows[-1]["a_peak"], st_peak=rows[-1]["st_peak"],
                    st_max=rows[-1]["st_max"], max_abs_mass_drift=float(np.max(np.abs(np.asarray(sol.mass_drift)))),
                    steps=int(sol.stats["steps"]), rejected=int(sol.stats["rejected"]), result=rname,

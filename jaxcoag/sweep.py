@@ -150,7 +150,7 @@ def _is_result(x):
 
 def _member_fn(fn, names, meta):
     """fn of keyword args -> flat dict of arrays (incl. 'status' int32); records the grid in meta."""
-    from .binned import RESULTS
+    from .binned import RESULT_NAMES, result_code
 
     def one(*vals):
         out = fn(**dict(zip(names, vals)))
@@ -158,7 +158,7 @@ def _member_fn(fn, names, meta):
             meta["grid"] = out.grid
             return {"mass_per_bin": out.mass_per_bin, "number_per_bin": out.number_per_bin,
                     "gel_mass": out.gel_mass, "mass_drift": out.mass_drift, "t": out.ts,
-                    "steps": jnp.asarray(out.stats["steps"]), "status": jnp.asarray(out.result._value, jnp.int32)}
+                    "steps": jnp.asarray(out.stats["steps"]), "status": result_code(out.result)}
         if not isinstance(out, dict):
             out = {"value": out}
         flat, res = {}, None
@@ -174,13 +174,13 @@ def _member_fn(fn, names, meta):
                 raise JaxcoagInputError(f"fn output {k!r} must be numeric arrays.")
             flat[k] = v
         if res is not None:
-            status = jnp.asarray(res._value, jnp.int32)
+            status = result_code(res)
         else:
             finite = jnp.array(True)
             for v in flat.values():
                 if jnp.issubdtype(v.dtype, jnp.inexact):
                     finite = finite & jnp.all(jnp.isfinite(v))
-            status = jnp.where(finite, RESULTS.successful._value, RESULTS.nonfinite._value).astype(jnp.int32)
+            status = jnp.where(finite, RESULT_NAMES.index("successful"), RESULT_NAMES.index("nonfinite")).astype(jnp.int32)
         flat["status"] = status
         return flat
 
@@ -339,10 +339,10 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         raise JaxcoagInputError("fn must be hashable (a function or a hashable callable object).") from e
     out, meta = _run(fn, names, cols, chunk, mesh, progress)
     if bad.any():
-        from .binned import RESULTS
+        from .binned import RESULT_NAMES
         for k, v in out.items():
             if k == "status":
-                out[k] = np.where(bad, np.int32(RESULTS.invalid_parameters._value), v).astype(np.int32)
+                out[k] = np.where(bad, np.int32(RESULT_NAMES.index("invalid_parameters")), v).astype(np.int32)
             elif np.issubdtype(v.dtype, np.inexact) and k != "t":
                 v = v.copy()
                 v[bad] = np.nan

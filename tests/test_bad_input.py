@@ -438,25 +438,7 @@ import time  # noqa: E402
 from jaxcoag import checkpoint as ckmod, cli, config, runner  # noqa: E402
 from jaxcoag.binned.scheme import check_memory, estimate_bytes  # noqa: E402
 
-SMALL_TOML = """
-[run]
-name = "small_growth"
-[gas]
-model = "mmsn_hayashi81"
-R_au = 1.0
-alpha = 1e-3
-[dust]
-rho_s = 1.6
-a0 = 1e-4
-[grid]
-m_max = 1e-6
-bins_per_decade = 2
-[solver]
-rtol = 1e-4
-[time]
-t_end_yr = 10.0
-n_out = 3
-"""
+from _configs import SMALL as SMALL_TOML  # noqa: E402  (shared test configuration)
 
 
 def _files(root):
@@ -717,16 +699,15 @@ def test_mc_bad_checkpoint_refused_naming_the_file(tmp_path):
 
 
 def test_mc_capacity_below_the_target_refused():
-    """A grouped run merges species above ~0.9 S, so S must hold ns_target species: distribution
-    Ng* = 50 needs S >= 56 (floor(0.9 * 55) = 49 < 50 <= floor(0.9 * 56)); equal-mass Ns* = 16
-    needs S >= 20 (S = 19: min(floor(17.1), 19 - 1 - 3) = 15 < 16)."""
+    """An equal-mass run merges species above min(0.9 S, S - 4), so S must hold Ns* species: Ns* = 16
+    needs S >= 20 (S = 19: min(floor(17.1), 19 - 1 - 3) = 15 < 16). (For the distribution method
+    min_capacity says which S keeps min(0.9 S, Ng*) = Ng*: 56 for Ng* = 50; there Ng* counts groups,
+    not species, and a smaller S is an allowed species cap.)"""
     from jaxcoag import mc
 
     assert mc.min_capacity("distribution", 50) == 56 and mc.min_capacity("equal_mass", 16) == 20
     assert mc.min_capacity(None, 1000) is None
     base = dict(n_particles=1e6, t_out=[0.5], key=jax.random.key(0))
-    _raises(lambda: mc.run(K, grouping="distribution", ns_target=50, capacity=55, **base),
-            r"capacity = 55 species slots cannot hold ns_target = 50 distribution species.*capacity >= 56")
     _raises(lambda: mc.run(K, grouping="equal_mass", ns_target=16, capacity=19, **base),
             r"cannot hold ns_target = 16 equal_mass species.*capacity >= 20")
 

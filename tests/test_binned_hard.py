@@ -100,3 +100,20 @@ def test_fragmentation_equilibrium_alpha_sweep(alpha):
     fd = (mean_logm(x + 1e-3) - mean_logm(x - 1e-3)) / 2e-3
     assert np.isfinite(float(gr)) and float(gr) < 0
     assert float(gr) == pytest.approx(float(fd), rel=1e-3, abs=1e-6)
+
+
+def test_result_codes_round_trip_through_the_public_enumeration_api():
+    """Every RESULTS item has a code = its position in RESULT_NAMES, and the code maps back (also under
+    jit and batched), with the message equinox stores for it; no private equinox attribute is used."""
+    from jaxcoag.binned import RESULT_NAMES, RESULTS, result_code, result_from_code
+
+    assert len(RESULTS) == len(RESULT_NAMES) == len(set(RESULT_NAMES))
+    for i, name in enumerate(RESULT_NAMES):
+        item = getattr(RESULTS, name)
+        assert int(result_code(item)) == i
+        assert bool(result_from_code(i) == item)
+        assert bool(jax.jit(result_from_code)(jnp.int32(i)) == item)
+    assert RESULTS[RESULTS.successful] == ""
+    assert "max_steps" in RESULTS[RESULTS.max_steps_reached]
+    batch = result_from_code(jnp.arange(len(RESULT_NAMES), dtype=jnp.int32))
+    np.testing.assert_array_equal(np.asarray(jax.jit(result_code)(batch)), np.arange(len(RESULT_NAMES)))

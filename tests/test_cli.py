@@ -8,25 +8,7 @@ import pytest
 
 from jaxcoag import cli, config, io, runner
 
-SMALL = """
-[run]
-name = "small_growth"
-[gas]
-model = "mmsn_hayashi81"
-R_au = 1.0
-alpha = 1e-3
-[dust]
-rho_s = 1.6
-a0 = 1e-4
-[grid]
-m_max = 1e-6
-bins_per_decade = 2
-[solver]
-rtol = 1e-4
-[time]
-t_end_yr = 10.0
-n_out = 3
-"""
+from _configs import SMALL  # noqa: E402  (shared test configuration)
 
 
 @pytest.fixture(scope="module")

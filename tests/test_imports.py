@@ -169,3 +169,32 @@ def test_netcdf_backend_is_usable():
         xr.Dataset({"y": ("t", np.arange(3.0))}).to_netcdf(p, engine="h5netcdf")
         with xr.open_dataset(p, engine="h5netcdf") as ds:
             np.testing.assert_array_equal(ds["y"].values, [0.0, 1.0, 2.0])
+
+
+# Private API of other libraries: a leading-underscore module or attribute of a third-party package,
+# or equinox Enumeration internals reached through our own RESULTS.
+_PRIVATE = re.compile(
+    r"(\b(?:from|import)\s+(?:diffrax|equinox|optax|optimistix|lineax|jax|xarray|numpy|scipy)(?:\.\w+)*\._\w+"
+    r"|\b(?:diffrax|equinox|eqx|optax|optx|optimistix|lineax|lx|jax|jnp|xr|xarray)\._[A-Za-z]\w*"
+    r"|\._(?:name_to_item|index_to_message|base_offsets|value)\b)")
+
+
+def test_no_private_api_of_other_libraries():
+    files = _py("jaxcoag") + _py("tests") + _py("examples") + _py("paper_figs") + _py("benchmarks")
+    me = Path(__file__).resolve()
+    hits = []
+    for p in files:
+        if p.resolve() == me:
+            continue
+        for n, line in enumerate(p.read_text().splitlines(), start=1):
+            if _PRIVATE.search(line):
+                hits.append(f"{p.relative_to(ROOT)}:{n}: {line.strip()}")
+    assert not hits, "private API of another library:\n" + "\n".join(hits)
+
+
+def test_private_api_detector_flags_each_form():
+    bad = ["from diffrax._local_interpolation import X", "RESULTS._name_to_item", "x = item._value",
+           "import jax._src.core", "eqx._enum"]
+    good = ["from diffrax import LocalLinearInterpolation", "self._value_cache = 1", "jax.numpy", "_attr_value(v)"]
+    assert all(_PRIVATE.search(s) for s in bad)
+    assert not any(_PRIVATE.search(s) for s in good)

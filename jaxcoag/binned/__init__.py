@@ -7,7 +7,8 @@ Stammler & Birnstiel (2022, DustPy).
 from .grid import MassGrid as MassGrid
 from .scheme import AbstractScheme as AbstractScheme
 from .twobin import TwoBinScheme as TwoBinScheme
-from .solve import (solve_binned as solve_binned, BinnedSolution as BinnedSolution, RESULTS as RESULTS,
+from .solve import (solve_binned as solve_binned, BinnedSolution as BinnedSolution, RESULTS as RESULTS, RESULT_NAMES as RESULT_NAMES,
+                    result_code as result_code, result_from_code as result_from_code,
                     steady_state as steady_state, SteadyState as SteadyState)
 from .solvers import LinearlyImplicitEuler as LinearlyImplicitEuler
 from .fragmentation import (Shattering as Shattering, ShatterToMonomers as ShatterToMonomers,

@@ -37,7 +37,8 @@ from .grid import MassGrid
 from .scheme import AbstractScheme, check_memory
 from .twobin import TwoBinScheme
 
-__all__ = ["solve_binned", "BinnedSolution", "RESULTS", "make_scheme", "steady_state", "SteadyState"]
+__all__ = ["solve_binned", "BinnedSolution", "RESULTS", "RESULT_NAMES", "result_code", "result_from_code",
+           "make_scheme", "steady_state", "SteadyState"]
 
 
 class RESULTS(eqx.Enumeration):
@@ -55,6 +56,33 @@ class RESULTS(eqx.Enumeration):
                      "another internal error). Try a different solver or tighter tolerances.")
     invalid_parameters = ("A parameter of this sweep member is NaN/inf, so it was not run (jaxcoag.sweep.sweep "
                           "with invalid='flag'). Fix that parameter value.")
+
+
+#: The :class:`RESULTS` items in definition order. The integer code of an item (the ``status`` of sweeps,
+#: the ``result_code`` of netCDF files and checkpoints) is its position here; ``len(RESULTS)`` equals
+#: ``len(RESULT_NAMES)`` (tested). Only equinox's public Enumeration API is used with it.
+RESULT_NAMES = ("successful", "max_steps_reached", "nonfinite", "negative_density", "solver_failed",
+                "invalid_parameters")
+
+
+def result_code(result):
+    """Integer code (int32 array, traceable, batched like ``result``) of a :class:`RESULTS` item."""
+    code = jnp.int32(0)
+    for i, name in enumerate(RESULT_NAMES[1:], start=1):
+        code = jnp.where(result == getattr(RESULTS, name), jnp.int32(i), code)
+    return code
+
+
+def result_from_code(code):
+    """The :class:`RESULTS` item of an integer code (inverse of :func:`result_code`; traceable; an
+    array of codes gives a batched item)."""
+    code = jnp.asarray(code)
+    if code.ndim:
+        return jax.vmap(result_from_code)(code)
+    item = RESULTS.successful
+    for i, name in enumerate(RESULT_NAMES[1:], start=1):
+        item = RESULTS.where(code == i, getattr(RESULTS, name), item)
+    return item
 
 
 class BinnedSolution(eqx.Module):

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import diffrax
-from diffrax._local_interpolation import LocalLinearInterpolation
+from diffrax import LocalLinearInterpolation
 
 __all__ = ["LinearlyImplicitEuler"]
 

@@ -608,8 +608,9 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
         ns_target: Ns* (equal-mass / const_ns) or Ng* (distribution); default 1000.
         f_eps: maximum fractional mass gain per group event (eq. 5.11); default 1e-3.
         capacity: number of species slots S (static). Default: none: min(n_particles, 2048)+8;
-            equal_mass: 8 ns_target; distribution: 2 ns_target. A grouped run whose capacity cannot
-            hold ns_target is refused up front (``min_capacity``); a run that still runs out of slots
+            equal_mass: 8 ns_target; distribution: 2 ns_target. An equal-mass run whose capacity cannot
+            hold Ns* species is refused up front (``min_capacity``); a distribution run keeps at most
+            min(0.9 S, Ng*) species (scheduled merges of mass neighbours); a run that still runs out of slots
             merges mass neighbours (status CAPACITY) and warns with ``CapacityWarning``; under a
             user's jit/vmap the flag is only in ``status`` (check it there).
         outcome: an ``AbstractOutcome`` (default ``PerfectSticking()``); e.g.
@@ -825,9 +826,11 @@ def run(kernel, *, n_particles=None, m0=1.0, rho_d=None, t_out, key=None, mode="
     if resume_from is None and capacity < n_init + outcome.n_products + 2:
         raise JaxcoagInputError(f"capacity {capacity} cannot hold the {n_init} initial species; give capacity >= "
                                 f"{n_init + outcome.n_products + 2}")
-    if grouping is not None and not is_traced(ns_target):
-        # the merge threshold is a fraction of S: a smaller S would silently cap the species count
-        # below ns_target (a coarser run than asked for); refuse instead
+    if grouping == "equal_mass" and not is_traced(ns_target):
+        # Ns* is a species count and the merge threshold a fraction of S: a smaller S would silently
+        # cap the species count below ns_target (a coarser run than asked for); refuse instead. (With
+        # grouping="distribution" ns_target = Ng* counts groups, not species; there the capacity is the
+        # documented species cap min(0.9 S, Ng*), e.g. Fig. 5.7 runs Ng* = 2000 in S = 1024 slots.)
         s_min = min_capacity(grouping, float(ns_target), int(outcome.n_products))
         if capacity < s_min:
             raise JaxcoagInputError(
