@@ -57,6 +57,19 @@ def time_norm(t_s):
 
 
 
+def _m2f_axes(ax, y, ylabel, title):
+    """Log-log axes of m^2 f(m) against m [g], the y range spanning 8 decades below the maximum
+    of the finite positive values of ``y``."""
+    pos = y[np.isfinite(y) & (y > 0)]
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    if pos.size:
+        ax.set_ylim(max(pos.min(), pos.max() * 1e-8), pos.max() * 3)
+    ax.set_xlabel("m [g]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+
+
 def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=None):
     """Four-panel overview of a :class:`~jaxcoag.binned.BinnedSolution`.
 
@@ -121,14 +134,7 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=N
     sm = ScalarMappable(norm=tnorm, cmap=cmap)
     sm.set_array(tv)
     fig.colorbar(sm, ax=ax_f, label=tlabel + (" (log scale)" if isinstance(tnorm, colors.LogNorm) else ""))
-    pos = y[y > 0]
-    ax_f.set_xscale("log")
-    ax_f.set_yscale("log")
-    if pos.size:
-        ax_f.set_ylim(max(pos.min(), pos.max() * 1e-8), pos.max() * 3)
-    ax_f.set_xlabel("m [g]")
-    ax_f.set_ylabel(r"$m^2 f(m)$ = d$\rho$/d ln m [g cm$^{-3}$]")
-    ax_f.set_title("(a) mass distribution")
+    _m2f_axes(ax_f, y, r"$m^2 f(m)$ = d$\rho$/d ln m [g cm$^{-3}$]", "(a) mass distribution")
     if frag_limit is not None:
         ax_f.axvline(m_fr, color="C3", ls="--", lw=1.2, gid="frag_limit",
                      label=f"fragmentation limit a = {a_fr:.3g} cm (St = {st_fr:.3g})")
@@ -279,14 +285,7 @@ def sweep_panel(ds, path=None, *, dpi=110, title=None):
     sm = ScalarMappable(norm=norm, cmap=cmap)
     sm.set_array(x)
     fig.colorbar(sm, ax=ax_f, label=p0)
-    pos = y[np.isfinite(y) & (y > 0)]
-    ax_f.set_xscale("log")
-    ax_f.set_yscale("log")
-    if pos.size:
-        ax_f.set_ylim(max(pos.min(), pos.max() * 1e-8), pos.max() * 3)
-    ax_f.set_xlabel("m [g]")
-    ax_f.set_ylabel(r"$m^2 f(m)$ at $t_{\rm end}$ [g cm$^{-3}$]")
-    ax_f.set_title("(b) final mass distributions")
+    _m2f_axes(ax_f, y, r"$m^2 f(m)$ at $t_{\rm end}$ [g cm$^{-3}$]", "(b) final mass distributions")
 
     if len(swept) == 2:
         ax_c = ax[2]

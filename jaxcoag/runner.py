@@ -489,7 +489,6 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     a_m = np.empty(rho_last.shape[:-1] + (grid.nbins,))
     st_m = np.empty_like(a_m)
     mesh0 = np.meshgrid(*[sweep_params[k] for k in pdims], indexing="ij")
-    mc = jnp.asarray(np.asarray(grid.centers))
     for idx in np.ndindex(*a_m.shape[:-1]):
         over = {s: {} for s in ("gas", "dust")}
         for k, mm in zip(pdims, mesh0):
@@ -497,11 +496,13 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
             if sec in over:
                 over[sec][key] = float(mm[idx])
         du = dict(cfg["dust"], **over["dust"])
-        pp = scene.kernel(cfgmod.make_gas(cfg["gas"], **over["gas"]), rho_s=du["rho_s"]).particles(mc)
-        a_m[idx], st_m[idx] = np.asarray(pp.a), np.asarray(pp.st)
-    ds["a"] = (pdims + ("mass",), a_m, {"units": "cm", "long_name": "grain radius of the bin-center mass"})
-    ds["St"] = (pdims + ("mass",), st_m, {"units": "1", "long_name": "Stokes number tau_f / t_L of the bin-center "
-                                                                     "mass in the member's gas"})
+        pc = io.particle_coords(scene.kernel(cfgmod.make_gas(cfg["gas"], **over["gas"]), rho_s=du["rho_s"]),
+                                grid.centers)
+        a_m[idx], st_m[idx] = pc["a"][1], pc["St"][1]
+    pc = io.particle_coords(built.kernel, grid.centers)  # names and units of the coordinates
+    ds["a"] = (pdims + ("mass",), a_m, pc["a"][2])
+    ds["St"] = (pdims + ("mass",), st_m, dict(pc["St"][2], long_name="Stokes number tau_f / t_L of the "
+                                                                      "bin-center mass in the member's gas"))
     ds.attrs["wall_s"] = wall
     from .io import result_table
     table = result_table()

@@ -20,6 +20,7 @@ import pytest
 import jax.numpy as jnp
 from matplotlib import colors
 
+from _configs import SMALL
 from _scripts import ROOT, load_script
 from jaxcoag import cli, config, io, kernels, plot, runner
 from jaxcoag.binned import MassGrid, monodisperse, solve_binned
@@ -30,27 +31,10 @@ YEAR_S = 365.25 * 86400.0  # Julian year [s]
 
 # 1 AU MMSN, alpha = 1e-3, 1 um grains (rho_s = 1.6); v_frag = 5 cm/s puts the fragmentation
 # barrier St_frag = 25 / (3e-3 c_g^2) ~ 8.4e-7 inside this small grid (monomer St ~ 2.4e-7)
-FRAG = """
-[run]
-name = "readable"
-[gas]
-model = "mmsn_hayashi81"
-R_au = 1.0
-alpha = 1e-3
-[dust]
-rho_s = 1.6
-a0 = 1e-4
-[grid]
-m_max = 1e-6
-bins_per_decade = 2
+FRAG = SMALL.replace('name = "small_growth"', 'name = "readable"') + """
 [fragmentation]
 model = "shattering"
 v_frag = 5.0
-[solver]
-rtol = 1e-4
-[time]
-t_end_yr = 10.0
-n_out = 3
 """
 
 
@@ -219,9 +203,6 @@ def test_version_flag_prints_the_installed_version():
     if exe is not None:  # the console script of the installed package
         q = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=120)
         assert q.returncode == 0 and q.stdout.strip() == f"jaxcoag {want}"
-
-
-SMALL = FRAG.split("[fragmentation]")[0] + FRAG.split('v_frag = 5.0\n')[1]
 
 
 def test_sweep_shows_progress_and_writes_the_figure(tmp_path, capsys):
