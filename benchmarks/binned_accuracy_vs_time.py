@@ -1,7 +1,7 @@
 """What accuracy costs in the binned engine, and how it compares with DustPy on the same boxes.
 
 For each problem (kernel + exact solution), scheme ("twobin", "dg" order 0/1/2), bins per
-decade and solver tolerance, this script solves with :func:`jaxcoag.binned.solve_binned`,
+decade and solver tolerance, this script runs ``jaxcoag.evolve(kernel, jaxcoag.Binned(grid, scheme=...), ...)``,
 records the relative L1 error of mass per bin at the final time against the analytic solution
 (:mod:`benchmarks._common`), the wall time of the solve after a warm-up compile (the compile
 time is reported separately) and the solver step counts. In the same run it solves the
@@ -48,6 +48,14 @@ if __package__ in (None, ""):
 from benchmarks import _common as C  # noqa: E402
 
 SCHEMES = {"twobin": ("twobin", 0), "dg0": ("dg", 0), "dg1": ("dg", 1), "dg2": ("dg", 2)}
+
+
+def scheme_object(key):
+    """The binned scheme object of a SCHEMES key: ``TwoBinScheme()`` or ``DGScheme(order=k)``."""
+    from jaxcoag.binned import DGScheme, TwoBinScheme
+
+    kind, order = SCHEMES[key]
+    return TwoBinScheme() if kind == "twobin" else DGScheme(order=order)
 
 
 def problems():
@@ -106,24 +114,23 @@ def run_ours(name, scheme_key, bpd, rtols, *, atol_factor=1e-4):
     its time minus the second call's. Returns a list of result dicts (one per rtol).
     """
     import jax
-    from jaxcoag.binned import RESULTS, MassGrid, solve_binned
-    from jaxcoag.binned.solve import make_scheme
+    import jaxcoag
+    from jaxcoag import RESULT_NAMES, MassGrid
 
     p = problems()[name]
-    scheme, order = SCHEMES[scheme_key]
     grid = MassGrid.log(p["m_min"], p["m_max"], bpd)
     f0 = initial_density(p)
-    ts = np.array((p["t_start"],) + tuple(p["t_out"]), dtype=np.float64)
+    ts = np.array((p["t_start"],) + tuple(p["t_out"]), dtype=np.float64)  # outputs incl. the start
     kern = kernel_of(p)
-    sch = make_scheme(scheme, order)
+    sch = scheme_object(scheme_key)
     ref = C.reference_mass_per_bin(p["kind"], grid.edges, ts[-1], coeff=p["coeff"], n0=p["n0"],
                                    m0=p["m0"])
 
     def solve(rtol):
         ctrl = _controller(sch, grid, f0, rtol, atol_factor * rtol)
-        sol = solve_binned(kern, grid, f0, ts, scheme=scheme, order=order,
-                           stepsize_controller=ctrl, throw=False)
-        jax.block_until_ready(sol.mass_per_bin)
+        sol = jaxcoag.evolve(kern, jaxcoag.Binned(grid, scheme=sch, stepsize_controller=ctrl), f0, ts,
+                             t0=ts[0], throw=False)
+        jax.block_until_ready(sol.rho)
         return sol
 
     out = []
@@ -140,11 +147,9 @@ def run_ours(name, scheme_key, bpd, rtols, *, atol_factor=1e-4):
                 break
         if i == 0:
             compile_s = max(tfirst.seconds - walls[0], 0.0)
-        ok = bool(sol.result == RESULTS.successful)
-        result_name = next((n for n in ("successful", "max_steps_reached", "nonfinite",
-                                        "negative_density", "solver_failed")
-                            if bool(sol.result == getattr(RESULTS, n))), "unknown")
-        rho = np.asarray(sol.mass_per_bin[-1])
+        ok = bool(sol.status == jaxcoag.RESULTS.successful)
+        result_name = next(n for n in RESULT_NAMES if bool(sol.status == getattr(jaxcoag.RESULTS, n)))
+        rho = np.asarray(sol.mass_per_bin()[-1])
         l1 = C.rel_l1(rho, ref) if ok and np.all(np.isfinite(rho)) else None
         out.append(dict(code="jaxcoag", problem=name, scheme=scheme_key, bins_per_decade=bpd,
                         nbins=grid.nbins, rtol=rtol, atol_rel=atol_factor * rtol,

@@ -39,13 +39,14 @@ def run_ours(scheme, order, bpd, p, rtol=1e-8):
     f0 = jaxcoag.binned.exponential(p["m0"], p["n0"])
     ts = jnp.array((0.0,) + tuple(p["t_out"]))
     kern = kernels.Sum(p["coeff"])
-    solve = lambda: jaxcoag.solve_binned(kern, grid, f0, ts, scheme=scheme, order=order, rtol=rtol)
+    sch = jaxcoag.binned.TwoBinScheme() if scheme == "twobin" else jaxcoag.binned.DGScheme(order=order)
+    solve = lambda: jaxcoag.evolve(kern, jaxcoag.Binned(grid, scheme=sch, rtol=rtol), f0, ts)
     t0 = time.perf_counter()
-    jax.block_until_ready(solve().mass_per_bin)
+    jax.block_until_ready(solve().rho)
     compile_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     sol = solve()
-    rho = np.asarray(jax.block_until_ready(sol.mass_per_bin))
+    rho = np.asarray(jax.block_until_ready(sol.mass_per_bin()))
     wall = time.perf_counter() - t0
     ref = C.reference_mass_per_bin("sum", grid.edges, p["t_out"][-1], coeff=p["coeff"], n0=p["n0"], m0=p["m0"])
     return dict(code="jaxcoag", scheme=f"{scheme}{order if scheme == 'dg' else ''}", bins_per_decade=bpd,

@@ -48,7 +48,7 @@ import numpy as np
 
 from benchmarks import _common as C
 from jaxcoag import fit
-from jaxcoag.binned import RESULTS
+from jaxcoag import RESULTS
 
 OUT = C.RESULTS
 
@@ -61,7 +61,7 @@ def make_objective(model, names, adjoint):
 
     def f(x):
         sol = model.solve({k: jnp.exp(x[i]) for i, k in enumerate(names)}, adjoint=adjoint)
-        rho = sol.mass_per_bin[-1]
+        rho = sol.mass_per_bin()[-1]
         return jnp.sum(rho * lc) / jnp.sum(rho)
 
     return f
@@ -125,7 +125,7 @@ def run_case(bpd, fragmentation, reps, decades=8, t_end=1e10, v_frag=2.0):
         row[f"{name}_ratio"] = statistics.median([a / b for a, b in zip(per[name], per["forward"])])
     sol = model.solve({k: jnp.exp(x[i]) for i, k in enumerate(names)}, adjoint=rev)
     row["steps"] = int(sol.stats["steps"])
-    row["result"] = "successful" if bool(sol.result == RESULTS.successful) else "failed"
+    row["result"] = "successful" if bool(sol.status == RESULTS.successful) else "failed"
     row["mean_ln_m"] = float(vals["forward"])
     g_rev, g_fwd = vals["reverse"], vals["jacfwd"]
     c_fd = jax.jit(f_rev)

@@ -7,8 +7,8 @@ of the Shima spectrum (radius 30.531 um), box 1e6 m^3 (8.39e12 drops), outputs a
 1200/2400/3600 s. Metric: relative L1 of dm/dlnr on 128 log radius bins 10 um - 5 mm against
 the discrete Golovin solution (``jaxcoag.analytic.mass_per_bin(..., initial="monodisperse")``).
 
-Our side: ``jaxcoag.mc.run(Sum(1500), mode="const_v", grouping="equal_mass", ns_target=Ns,
-f_eps=...)``; sweep over Ns (and f_eps at one Ns); per configuration the first seed's run
+Our side: ``jaxcoag.evolve(Sum(1500), jaxcoag.MonteCarlo(grouping=jaxcoag.mc.EqualMass(), ns_target=Ns,
+f_eps=..., n_particles=...), jaxcoag.Monodisperse(m0, rho_d), t_out, key=...)`` (constant volume); sweep over Ns (and f_eps at one Ns); per configuration the first seed's run
 includes compilation (``compile_s`` = its time minus the timed run), later seeds are timed;
 events per second = events / timed wall time. PySDM: Numba CPU backend, n_sd sweep, same
 monodisperse problem (``benchmarks/peers/pysdm_golovin.py``); PySDM on its own exponential
@@ -69,22 +69,23 @@ def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=8):
     (seconds per event of the timed seeds), when a second seed exists.
     """
     import jax
+    import jaxcoag
     from jaxcoag import mc
     from jaxcoag.kernels import Sum
 
-    kw = dict(n_particles=N0 * VOLUME, m0=M0, rho_d=N0 * M0, t_out=np.asarray(times),
-              mode="const_v", grouping="equal_mass", ns_target=ns_target, f_eps=f_eps,
-              capacity=int(capacity_factor * ns_target))
+    engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), n_particles=N0 * VOLUME, ns_target=ns_target, f_eps=f_eps,
+                                capacity=int(capacity_factor * ns_target))
+    initial = jaxcoag.Monodisperse(M0, N0 * M0)
     refs = np.array([P.golovin_reference_dm_dlnr_monodisperse(t) for t in times])
     out = []
     for i, seed in enumerate(seeds):
         with C.Timer() as tm:
-            r = mc.run(Sum(B), key=jax.random.PRNGKey(seed), **kw)
+            r = jaxcoag.evolve(Sum(B), engine, initial, np.asarray(times), key=jax.random.PRNGKey(seed), throw=False)
             jax.block_until_ready(r.m)
         spec = np.asarray(r.mass_per_bin(M_EDGES)) / DLNR[None, :]
         l1 = [C.rel_l1(s, ref) for s, ref in zip(spec, refs)]
         l1c = coarse_l1(spec[-1], refs[-1])
-        status = r.status_names() if callable(getattr(r, "status_names", None)) else int(r.status)
+        status = jaxcoag.status_names(r.status)
         out.append(dict(code="jaxcoag", ns_target=ns_target, f_eps=f_eps, seed=seed,
                         capacity=int(capacity_factor * ns_target),
                         first_call=(i == 0), time_s=tm.seconds, n_events=int(r.n_events),

@@ -1,4 +1,5 @@
-"""Wall time of jaxcoag.mc.run vs Ns* and vs simulated time; events per second.
+"""Wall time of the Monte Carlo engine (``jaxcoag.evolve`` with ``jaxcoag.MonteCarlo``) vs Ns* and vs simulated
+time; events per second.
 
 Sum kernel K = (m1 + m2)/2, const-V, equal-mass grouping, N = 1e30 monomers, f_eps = 1e-3.
 Each configuration is timed on its second call (the first compiles; reported separately).
@@ -18,6 +19,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 
+import jaxcoag
 from jaxcoag import kernels as K
 from jaxcoag import mc
 
@@ -25,19 +27,21 @@ OUT = os.path.join(os.path.dirname(__file__), "results")
 
 
 def timed(ns, tend, rates="incremental", seed=1):
-    kw = dict(n_particles=1e30, t_out=jnp.array([0.0, tend]), grouping="equal_mass", ns_target=ns,
-              f_eps=1e-3, rates=rates)
+    engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=ns, f_eps=1e-3,
+                                rates={"incremental": mc.IncrementalRates(), "full": mc.FullRates()}[rates])
+    run = lambda key: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0),  # noqa: E731
+                                     jnp.array([0.0, tend]), key=key, throw=False)
     t0 = time.perf_counter()
-    r = mc.run(K.Sum(0.5), key=jax.random.key(0), **kw)
+    r = run(jax.random.key(0))
     jax.block_until_ready(r.m)
     tc = time.perf_counter() - t0
     t0 = time.perf_counter()
-    r = mc.run(K.Sum(0.5), key=jax.random.key(seed), **kw)
+    r = run(jax.random.key(seed))
     jax.block_until_ready(r.m)
     tw = time.perf_counter() - t0
     ev = int(r.n_events)
     return dict(ns=ns, t=tend, rates=rates, first_call_s=tc, wall_s=tw, events=ev, ev_per_s=ev / tw,
-                status=mc.status_names(int(r.status)) if hasattr(mc, "status_names") else int(r.status),
+                status=next(n for n in jaxcoag.RESULT_NAMES if bool(r.status == getattr(jaxcoag.RESULTS, n))),
                 Ns_end=int(r.n_species[-1]))
 
 

@@ -45,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import _common as C
-from jaxcoag import diagnostics, fit
+from jaxcoag import fit
 from jaxcoag.sweep import parameter_points, sweep
 
 OUT = C.RESULTS
@@ -60,8 +60,7 @@ def make_problem():
     def box(alpha, rho_g):
         """ln m_peak at 1e10 s [ln g] and the solver status, for alpha [-] and rho_g [g cm^-3]."""
         sol = model.solve({"alpha": alpha, "rho_g": rho_g}, adjoint=adj)
-        return {"ln_mpeak": jnp.log(diagnostics.mass_peak(sol.mass_per_bin[-1], model.grid)),
-                "result": sol.result}
+        return {"ln_mpeak": jnp.log(sol.mass_peak()[-1]), "result": sol.status}
 
     return box, float(model.rho_g), model.grid.nbins
 

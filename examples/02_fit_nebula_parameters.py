@@ -32,7 +32,7 @@ def main(argv=None):
     truth = {"alpha": 1e-4, "rho_g": float(model.rho_g)}
     init = {"alpha": 3.0 * truth["alpha"], "rho_g": truth["rho_g"] / 3.0}
     target = fit.synthetic_target(model, truth, noise=0.01, key=jax.random.key(2024))
-    print(f"forward model: {model.grid.nbins} bins, observed at t = {[float(t) for t in model.ts[1:]]} s")
+    print(f"forward model: {model.grid.nbins} bins, observed at t = {[float(t) for t in model.t_out[1:]]} s")
     print(f"truth: alpha = {truth['alpha']:.4e}, rho_g = {truth['rho_g']:.4e} g cm^-3; start a factor 3 away")
 
     out = {}

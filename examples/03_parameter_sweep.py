@@ -37,9 +37,9 @@ def main(argv=None):
     def box(alpha, rho_g):
         """Mass peak [g] and mass-weighted mean ln m at t = 1e10 s for alpha [-], rho_g [g cm^-3]."""
         sol = model.solve({"alpha": alpha, "rho_g": rho_g}, adjoint=diffrax.RecursiveCheckpointAdjoint())
-        rho = sol.mass_per_bin[-1]
+        rho = sol.mass_per_bin()[-1]
         return {"mass_peak": diagnostics.mass_peak(rho, model.grid),
-                "mean_ln_m": jnp.sum(rho * lc) / jnp.sum(rho), "result": sol.result}
+                "mean_ln_m": jnp.sum(rho * lc) / jnp.sum(rho), "result": sol.status}
 
     params = {"alpha": alphas, "rho_g": rhos}
     t0 = time.perf_counter()

@@ -27,7 +27,7 @@ jax.config.update("jax_enable_x64", True)
 import diffrax
 import numpy as np
 
-from jaxcoag import diagnostics, fit
+from jaxcoag import fit
 from jaxcoag.sweep import sweep
 
 
@@ -43,8 +43,7 @@ def main(argv=None):
     def box(alpha, rho_g):
         """Final mass per bin [g cm^-3] and mass peak [g] at t = 1e10 s."""
         sol = model.solve({"alpha": alpha, "rho_g": rho_g}, adjoint=diffrax.RecursiveCheckpointAdjoint())
-        return {"mass_per_bin": sol.mass_per_bin[-1], "mass_peak": diagnostics.mass_peak(sol.mass_per_bin[-1], model.grid),
-                "result": sol.result}
+        return {"mass_per_bin": sol.mass_per_bin()[-1], "mass_peak": sol.mass_peak()[-1], "result": sol.status}
 
     devices = jax.devices()
     t0 = time.perf_counter()

@@ -1,22 +1,27 @@
 """Command-line interface.
 
-``jaxcoag run [scene.toml] [--out FILE]``  the main job: a binned coagulation(-fragmentation) run of a
-                                           TOML configuration (default: growth and fragmentation at 1 AU
-                                           in the MMSN); saves netCDF + figure panel, prints a summary.
+``jaxcoag run [scene.toml | -] [--out FILE]``  the main job: a coagulation(-fragmentation) run of a TOML
+                                           configuration (``-``: read it from stdin) with its engine
+                                           (``[run] engine = "binned" | "mc"``; default: the binned run of
+                                           growth and fragmentation at 1 AU in the MMSN, ``--engine mc``
+                                           its Monte Carlo twin); saves netCDF + figure panel, prints a
+                                           summary. Every engine writes the same netCDF layout.
 ``jaxcoag plot FILE [--out PNG]``          re-plot a saved run.
 ``jaxcoag sweep [scene.toml] --param alpha=1e-4,1e-3 ...``  parameter sweep of a configuration (progress
                                            bar over the members; netCDF + figure of the final mass peak).
 ``jaxcoag --version``                      the installed version (importlib.metadata).
-``jaxcoag config [--default]``             print the default configuration (a commented TOML template).
+``jaxcoag config [--engine mc] [--resolved]``  print the default configuration (a commented, runnable TOML
+                                           template: ``jaxcoag config --engine mc | jaxcoag run -``).
 ``jaxcoag demo``                           relative velocities and kernel of the ch. 4 nebula scene.
 
-``jaxcoag`` with no subcommand runs ``jaxcoag run``. Exit codes: 0 success, 1 the solver failed (the
-outputs up to the failure are saved) or the run stopped early (``--max-segments``), 2 refused input
-(a one-line reason on stderr, no traceback; checked before any computation, nothing is written:
-bad configuration, a grid too large for the memory, an output location that cannot be written,
-an unreadable / corrupted / foreign checkpoint with ``--resume``), 130 interrupted (Ctrl-C: the
-completed output intervals are in the checkpoint and the exact command that resumes the run is
-printed on stderr).
+``jaxcoag`` with no subcommand runs ``jaxcoag run``. Exit codes: 0 success, 1 the run failed (a
+failure status of :data:`jaxcoag.FAILURES`, e.g. the solver's step budget or the Monte Carlo event
+budget; the outputs up to the failure are saved) or stopped early (``--max-segments``), 2 refused
+input (a one-line reason naming the ``[section] key`` on stderr, no traceback; checked before any
+computation, nothing is written: bad configuration, a grid too large for the memory, an output
+location that cannot be written, an unreadable / corrupted / foreign checkpoint with ``--resume``),
+130 interrupted (Ctrl-C: the completed output times are in the checkpoint and the exact command
+that resumes the run is printed on stderr).
 """
 
 from __future__ import annotations
@@ -63,10 +68,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="print the installed jaxcoag version and exit")
     sub = p.add_subparsers(dest="command")
 
-    r = sub.add_parser("run", help="run a TOML scene with the binned engine (default: 1 AU disk, growth + "
+    r = sub.add_parser("run", help="run a TOML scene with its engine (default: binned 1 AU disk, growth + "
                        "fragmentation); saves netCDF + figure")
-    r.add_argument("config", nargs="?", default=None, help="TOML run configuration (default: the built-in "
-                   "1 AU MMSN run; `jaxcoag config` prints it)")
+    r.add_argument("config", nargs="?", default=None, help="TOML run configuration, or - to read it from stdin "
+                   "(default: the built-in 1 AU MMSN run of --engine; `jaxcoag config` prints it)")
+    r.add_argument("--engine", choices=["binned", "mc"], default=None, help="without a file: the built-in default "
+                   "run of this engine (default binned); with a file: override its [run] engine")
     r.add_argument("--out", default=None, help="netCDF output file (default [output] path = jaxcoag_out/run.nc); "
                    "the figure goes next to it (.png)")
     r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -101,6 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: next to --out, e.g. sweep.png: final mass peak vs the parameters)")
 
     c = sub.add_parser("config", help="print the default run configuration (TOML with comments)")
+    c.add_argument("--engine", choices=["binned", "mc"], default="binned", help="the default run of this engine "
+                   "(binned, or mc: a grouped Monte Carlo run of the same scene)")
     c.add_argument("--resolved", action="store_true", help="print every value incl. defaults instead")
 
     d = sub.add_parser("demo", help="relative velocities and kernel of the ch. 4 nebula scene (table + figure)")
@@ -114,10 +123,17 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _load_cfg(path, sets):
+def _load_cfg(path, sets, engine=None):
     from . import config
 
-    cfg = config.default() if path is None else config.load(path)
+    if path is None:
+        cfg = config.default(engine or "binned")
+    elif path == "-":
+        cfg = config.loads(sys.stdin.read(), source="<stdin>")
+    else:
+        cfg = config.load(path)
+    if engine is not None and path is not None:
+        sets = [f"run.engine={engine!r}"] + list(sets)
     if sets:
         over = {}
         for item in sets:
@@ -132,7 +148,7 @@ def _load_cfg(path, sets):
 def _cmd_run(args) -> int:
     from . import runner
 
-    cfg = _load_cfg(args.config, args.set)
+    cfg = _load_cfg(args.config, args.set, args.engine)
     if args.max_segments is not None and args.max_segments < 1:
         raise runner.JaxcoagInputError("--max-segments must be >= 1.")
     ck = False if args.no_checkpoint else args.checkpoint
@@ -144,6 +160,7 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_plot(args) -> int:
+    from . import constants as C
     from . import io, runner
     from .plot import panel
 
@@ -153,16 +170,16 @@ def _cmd_plot(args) -> int:
         ds = io.load_netcdf(args.file)
     except (OSError, ValueError) as e:
         raise runner.JaxcoagInputError(f"{args.file} is not a readable netCDF file ({e}).") from e
-    sol = runner.solution_from_dataset(ds)
     kern = runner.kernel_from_dataset(ds)
     out = args.out or runner.figure_path(args.file)
     title = str(ds.attrs.get("run_name", os.path.basename(args.file)))
     d = os.path.dirname(os.path.abspath(out))
     os.makedirs(d, exist_ok=True)
     fl = tuple(float(ds.attrs.get(k, "nan")) for k in ("m_frag_limit_g", "a_frag_limit_cm", "st_frag"))
-    panel(sol, kern, path=out, title=title, frag_limit=fl if fl[0] > 0 else None)
-    print(f"jaxcoag plot: {sol.grid.nbins} bins, {len(sol.ts)} outputs up to t = {float(sol.ts[-1]) / 3.15576e7:.4g} yr"
-          f" ({'with' if kern is not None else 'without'} the run's kernel); saved {out}")
+    panel(ds, kern, path=out, title=title, frag_limit=fl if fl[0] > 0 else None)
+    t = ds["t"].values
+    print(f"jaxcoag plot: {ds.attrs.get('engine', '?')} run, {ds.sizes['m']} bins, {t.size} outputs up to t = "
+          f"{float(t[-1]) / C.yr:.4g} yr ({'with' if kern is not None else 'without'} the run's kernel); saved {out}")
     return 0
 
 
@@ -193,9 +210,9 @@ def _cmd_config(args) -> int:
     from . import config
 
     if args.resolved:
-        print(config.to_toml(config.default().data))
+        sys.stdout.write(config.to_toml(config.default(args.engine).data))
     else:
-        with open(config.default_path()) as fh:
+        with open(config.default_path(args.engine)) as fh:
             sys.stdout.write(fh.read())
     return 0
 
@@ -246,8 +263,10 @@ def _report_interrupt(name, argv, args, exc):
         return
     if where:
         cmd = list(argv) + ([] if "--resume" in argv else ["--resume"])
-        print(f"jaxcoag run: interrupted after {exc.segments_done} of {exc.n_segments} output intervals; "
+        print(f"jaxcoag run: interrupted after {exc.segments_done} of {exc.n_segments} output times; "
               f"checkpoint saved to {where}", file=sys.stderr)
+        if getattr(args, "config", None) == "-":
+            print("(the configuration came from stdin: feed the same configuration again)", file=sys.stderr)
         print("resume with: " + shlex.join(["jaxcoag"] + cmd), file=sys.stderr)
     else:
         why = "--no-checkpoint" if getattr(args, "no_checkpoint", False) else "the run had not started"

@@ -1,15 +1,17 @@
-"""Run configurations: a TOML file (or dict) describing one binned coagulation run.
+"""Run configurations: one TOML schema (pydantic v2 models, written with tomli-w) for every engine.
 
-A run configuration names the physics (``[scene]``), the local gas (``[gas]``), the dust
-(``[dust]``), the mass grid (``[grid]``), optional fragmentation (``[fragmentation]``), the
-time integration (``[solver]``), the output times (``[time]``) and the output files
-(``[output]``). ``jaxcoag run scene.toml`` executes it (:mod:`jaxcoag.runner`); the shipped
-default (``jaxcoag/data/default_run.toml``, :func:`default`) is a protoplanetary-disk run at
-1 AU with growth and fragmentation.
+A run configuration names the engine (``[run] engine``), the physics (``[scene]``), the local gas
+(``[gas]``), the dust (``[dust]``), the mass grid (``[grid]``: the binned engine's grid, and the
+bins every engine's output is written on), an optional collision outcome (``[fragmentation]``),
+the engine settings (``[solver]`` for the binned engine, ``[mc]`` for the Monte Carlo engine),
+the output times (``[time]``) and the output files (``[output]``). ``jaxcoag run scene.toml``
+executes it (:mod:`jaxcoag.runner`); the shipped defaults (:func:`default`) are a protoplanetary
+disk run at 1 AU with growth and fragmentation, binned (``jaxcoag config``) or Monte Carlo
+(``jaxcoag config --engine mc``).
 
 Schema (units in brackets; "req." = required, otherwise the default is shown)::
 
-    [run]            name = "run", description = ""
+    [run]            name = "run", description = "", engine = "binned" | "mc"
     [scene]          preset = "nebula_ch4"  (a jaxcoag.scenes.PRESETS name) | effects = [...]
                      (names from "brownian", "turbulence_oc07", "radial_drift",
                      "azimuthal_drift", "settling"; give preset OR effects),
@@ -30,38 +32,54 @@ Schema (units in brackets; "req." = required, otherwise the default is shown)::
                      mass sits at the centre of the first bin)
     [fragmentation]  absent = pure growth. model = "shattering" (v_frag req. [cm s^-1],
                      q = 11/6, probability = "maxwellian" | "sigmoid" | "linear" | "step",
-                     width, crater_ratio = 10, chi = 1) | "to_monomers" (m_frag req. [g])
-    [solver]         scheme = "twobin" | "dg", order = 0, method = "auto" | "kvaerno5" |
-                     "tsit5" | "linearly_implicit_euler", rtol = 1e-6, atol = 1e-10
+                     width, crater_ratio = 10, chi = 1; jaxcoag.outcomes.Shattering) |
+                     "to_monomers" (m_frag req. [g]; jaxcoag.outcomes.ShatterAbove)
+    [solver]         binned engine: scheme = "twobin" | "dg", order = 0, method = "auto" |
+                     "kvaerno5" | "tsit5" | "linearly_implicit_euler", rtol = 1e-6, atol = 1e-10
                      (relative to the total mass), max_steps = 100000 (per output segment)
+    [mc]             Monte Carlo engine (jaxcoag.MonteCarlo): seed = 0, grouping = "none" |
+                     "equal_mass" | "distribution" (default) with n_bins = 20, m_lo [g],
+                     n_rezoom, count_groups, tail_events = 0, tail_wmax (distribution only);
+                     volume = "constant_volume" | "constant_number" | "constant_species" (with
+                     controller = "mass" | "species"), ns_target = 1000, n_particles (physical
+                     particles in the simulated volume at t = 0), f_eps = 1e-3, capacity,
+                     max_events = 1e8, rates = "incremental" (n_refresh) | "full",
+                     neps_rounding = "ceil" | "floor", p_protect = 16, dedupe = true,
+                     merge_weighting = "mass" | "number" | "volume", leftover = "demagnify" |
+                     "stochastic"; n_particles is required with engine = "mc" (an MRN start
+                     puts n_particles monomer masses of dust in the simulated volume)
     [time]           t_end_yr [yr] (req. unless t_out_yr), n_out = 12, spacing = "log" |
                      "linear", t_first_yr = 1e-4 t_end_yr (log spacing); or t_out_yr = [...]
                      (strictly increasing, > 0). The run starts at t = 0 (1 yr = 3.15576e7 s).
     [output]         path = "jaxcoag_out/run.nc", figure = true (panel PNG next to it),
                      checkpoint = "" (file; "" = none)
 
-Errors: an unknown section or key (with a "did you mean" suggestion and the allowed keys),
-a missing required parameter, a value of the wrong type, a negative / NaN / zero value where a
-positive one is needed, a grid with fewer than 2 bins, output times that do not increase and
-incompatible effects (a duplicated effect, drift in a cloud core) all raise
-:class:`~jaxcoag._validate.JaxcoagInputError` naming the section and key. :func:`build` checks
-everything (gas state, kernel, grid, initial condition, fragmentation) before any file is
-written.
+``[solver]`` is read by the binned engine only and ``[mc]`` by the Monte Carlo engine only, so
+``--set run.engine=mc`` switches an existing configuration between engines.
 
-References: Hayashi (1981) MMSN; Ormel (2008) thesis Table 4.1 (ch4 disk), ch. 6 (clouds);
-Stammler & Birnstiel (2022, DustPy) default disk run; TOML v1.0.0.
+Errors: an unknown section or key (with a "did you mean" suggestion and the allowed keys), a
+missing required parameter, a value of the wrong type, a negative / NaN / zero value where a
+positive one is needed, a value outside its allowed set (the set is named), a grid with fewer
+than 2 bins, output times that do not increase and incompatible settings (a duplicated effect,
+drift in a cloud core, a key of another model) all raise :class:`~jaxcoag._validate.JaxcoagInputError`
+with one message that starts by naming ``[section] key``. :func:`build` checks everything (gas
+state, kernel, grid, initial condition, outcome, engine) before any file is written.
+
+References: Hayashi (1981) MMSN; Ormel (2008) thesis Table 4.1 (ch4 disk), ch. 5 (grouped Monte
+Carlo), ch. 6 (clouds); Stammler & Birnstiel (2022, DustPy) default disk run; TOML v1.0.0.
 """
 
 from __future__ import annotations
 
 import copy
-import dataclasses
 import difflib
 import hashlib
 import json
 import math
 import os
+import typing
 from importlib import resources
+from typing import Annotated, Literal, Optional
 
 try:  # Python >= 3.11
     import tomllib as _toml
@@ -69,96 +87,295 @@ except ImportError:  # pragma: no cover - Python 3.10
     import tomli as _toml
 
 import numpy as np
+import pydantic
+import tomli_w
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, model_validator
 
 from . import constants as C
 from ._validate import JaxcoagInputError
 
 __all__ = ["RunConfig", "Built", "load", "loads", "from_dict", "default", "default_path", "build", "to_toml",
-           "SCHEMA", "EFFECT_NAMES", "GAS_MODELS", "SWEEPABLE", "set_value", "n_bins", "check_memory"]
+           "SECTIONS", "EFFECT_NAMES", "GAS_MODELS", "ENGINES", "SWEEPABLE", "set_value", "n_bins", "check_memory",
+           "output_times_s", "make_scene", "make_gas", "make_outcome", "make_grid", "make_engine", "initial_state"]
 
-_REQ = object()  # marker: required key
-_AUTO = None  # marker: computed default
-
-# key -> (type, default, check); type in float, int, str, bool, "str_list", "float_list"
-# check: "pos" (> 0), "nonneg" (>= 0), None, or a tuple of allowed strings
-SCHEMA = {
-    "run": {"name": (str, "run", None), "description": (str, "", None)},
-    "scene": {
-        "preset": (str, _AUTO, None),
-        "effects": ("str_list", _AUTO, None),
-        "turbulence_method": (str, _AUTO, ("exact", "ya", "ch03")),
-        "focusing": (bool, False, None),
-        "drag_regime": (str, "auto", ("auto", "epstein", "stokes")),
-        "drag_convention": (str, "ormel", ("ormel", "dustpy")),
-    },
-    "gas": {
-        "model": (str, _REQ, ("mmsn_hayashi81", "ch4_disk", "local", "molecular_cloud")),
-        "R_au": (float, _AUTO, "pos"),
-        "alpha": (float, _AUTO, "nonneg"),
-        "z_H": (float, 0.0, "nonneg"),
-        "M_star_msun": (float, 1.0, "pos"),
-        "rho_X": (float, 1.0, "pos"),
-        "Sigma_g": (float, _AUTO, "pos"),
-        "T": (float, _AUTO, "pos"),
-        "n": (float, _AUTO, "pos"),
-    },
-    "dust": {
-        "rho_s": (float, _REQ, "pos"),
-        "a0": (float, _AUTO, "pos"),
-        "m0": (float, _AUTO, "pos"),
-        "dust_to_gas": (float, 0.01, "pos"),
-        "initial": (str, "monodisperse", ("monodisperse", "mrn")),
-        "a_max": (float, _AUTO, "pos"),
-        "q_mrn": (float, 3.5, None),
-    },
-    "grid": {
-        "m_min": (float, _AUTO, "pos"),
-        "m_max": (float, _REQ, "pos"),
-        "bins_per_decade": (float, 7.0, "pos"),
-    },
-    "fragmentation": {
-        "model": (str, "shattering", ("shattering", "to_monomers")),
-        "v_frag": (float, _AUTO, "pos"),
-        "q": (float, 11.0 / 6.0, None),
-        "probability": (str, "maxwellian", ("maxwellian", "sigmoid", "linear", "step")),
-        "width": (float, _AUTO, "nonneg"),
-        "crater_ratio": (float, 10.0, "pos"),
-        "chi": (float, 1.0, "pos"),
-        "m_frag": (float, _AUTO, "pos"),
-    },
-    "solver": {
-        "scheme": (str, "twobin", ("twobin", "dg")),
-        "order": (int, 0, "nonneg"),
-        "method": (str, "auto", ("auto", "kvaerno5", "tsit5", "linearly_implicit_euler")),
-        "rtol": (float, 1e-6, "pos"),
-        "atol": (float, 1e-10, "pos"),
-        "max_steps": (int, 100_000, "pos"),
-    },
-    "time": {
-        "t_end_yr": (float, _AUTO, "pos"),
-        "n_out": (int, 12, "pos"),
-        "spacing": (str, "log", ("log", "linear")),
-        "t_first_yr": (float, _AUTO, "pos"),
-        "t_out_yr": ("float_list", _AUTO, None),
-    },
-    "output": {
-        "path": (str, "jaxcoag_out/run.nc", None),
-        "figure": (bool, True, None),
-        "checkpoint": (str, "", None),
-    },
-}
-
-#: sections that must be present in a file
-REQUIRED_SECTIONS = ("gas", "dust", "grid", "time")
+Pos = Annotated[float, Field(gt=0)]
+NonNeg = Annotated[float, Field(ge=0)]
+PosInt = Annotated[int, Field(gt=0)]
+NonNegInt = Annotated[int, Field(ge=0)]
 
 EFFECT_NAMES = ("brownian", "turbulence_oc07", "radial_drift", "azimuthal_drift", "settling")
-GAS_MODELS = SCHEMA["gas"]["model"][2]
-_DISK_KEYS = {"mmsn_hayashi81": ("R_au", "alpha", "z_H", "M_star_msun"),
-              "ch4_disk": ("R_au", "alpha", "z_H", "M_star_msun", "rho_X"),
-              "local": ("R_au", "alpha", "z_H", "M_star_msun", "Sigma_g", "T"),
-              "molecular_cloud": ("n", "T")}
+ENGINES = ("binned", "mc")
+
+
+class _Section(BaseModel):
+    """A TOML table: unknown keys refused, no type coercion (an int is accepted for a float), finite numbers."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+class RunSection(_Section):
+    name: str = "run"
+    description: str = ""
+    engine: Literal["binned", "mc"] = "binned"
+
+
+class SceneSection(_Section):
+    preset: Optional[str] = None
+    effects: Optional[list[str]] = None
+    turbulence_method: Optional[Literal["exact", "ya", "ch03"]] = None
+    focusing: bool = False
+    drag_regime: Literal["auto", "epstein", "stokes"] = "auto"
+    drag_convention: Literal["ormel", "dustpy"] = "ormel"
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.preset is not None and self.effects is not None:
+            raise ValueError("[scene] give either preset or effects, not both.")
+        if self.preset is not None:
+            from .scenes import PRESETS
+            if self.preset not in PRESETS:
+                raise ValueError(f"[scene] preset = {self.preset!r} is not a preset; choose one of "
+                                 f"{sorted(PRESETS)}.{_suggest(self.preset, PRESETS)}")
+        if self.effects is not None:
+            if not self.effects:
+                raise ValueError(f"[scene] effects is empty; list at least one of {list(EFFECT_NAMES)}.")
+            for e in self.effects:
+                if e not in EFFECT_NAMES:
+                    raise ValueError(f"[scene] effects: unknown effect {e!r}; choose from {list(EFFECT_NAMES)}."
+                                     f"{_suggest(e, EFFECT_NAMES)}")
+            dup = sorted({e for e in self.effects if self.effects.count(e) > 1})
+            if dup:
+                raise ValueError(f"[scene] effects lists {dup} more than once; the effects are incompatible (each is "
+                                 "added once in quadrature). Keep one of each.")
+        return self
+
+
+#: keys of [gas] per model, and the required ones
+_GAS_KEYS = {"mmsn_hayashi81": ("R_au", "alpha", "z_H", "M_star_msun"),
+             "ch4_disk": ("R_au", "alpha", "z_H", "M_star_msun", "rho_X"),
+             "local": ("R_au", "alpha", "z_H", "M_star_msun", "Sigma_g", "T"),
+             "molecular_cloud": ("n", "T")}
 _GAS_REQUIRED = {"mmsn_hayashi81": ("R_au", "alpha"), "ch4_disk": ("R_au", "alpha"),
                  "local": ("R_au", "alpha", "Sigma_g", "T"), "molecular_cloud": ("n",)}
+GAS_MODELS = tuple(_GAS_KEYS)
+
+
+class GasSection(_Section):
+    model: Literal["mmsn_hayashi81", "ch4_disk", "local", "molecular_cloud"]
+    R_au: Optional[Pos] = None
+    alpha: Optional[NonNeg] = None
+    z_H: NonNeg = 0.0
+    M_star_msun: Pos = 1.0
+    rho_X: Pos = 1.0
+    Sigma_g: Optional[Pos] = None
+    T: Optional[Pos] = None
+    n: Optional[Pos] = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        allowed = _GAS_KEYS[self.model]
+        for k in sorted(self.model_fields_set - {"model"} - set(allowed), key=list(type(self).model_fields).index):
+            raise ValueError(f"[gas] {k} does not apply to model = {self.model!r}; its keys are {list(allowed)}.")
+        for k in _GAS_REQUIRED[self.model]:
+            if getattr(self, k) is None:
+                raise ValueError(f"missing required parameter [gas] {k} for model = {self.model!r}.")
+        return self
+
+
+class DustSection(_Section):
+    rho_s: Pos
+    a0: Optional[Pos] = None
+    m0: Optional[Pos] = None
+    dust_to_gas: Pos = 0.01
+    initial: Literal["monodisperse", "mrn"] = "monodisperse"
+    a_max: Optional[Pos] = None
+    q_mrn: float = 3.5
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.a0 is None and self.m0 is None:
+            raise ValueError("missing required parameter [dust] a0 (monomer radius, cm) or m0 (monomer mass, g).")
+        if self.a0 is not None and self.m0 is not None:
+            raise ValueError("[dust] give exactly one of a0 (monomer radius, cm) or m0 (monomer mass, g), not both.")
+        a0 = self.a0 if self.a0 is not None else (3.0 * self.m0 / (4.0 * math.pi * self.rho_s)) ** (1.0 / 3.0)
+        if self.initial == "mrn":
+            if self.a_max is None:
+                raise ValueError("missing required parameter [dust] a_max (largest MRN grain, cm) for initial = 'mrn'.")
+            if not self.a_max > a0:
+                raise ValueError(f"[dust] a_max = {self.a_max!r} cm must exceed a0 = {a0:.4g} cm.")
+        elif self.a_max is not None:
+            raise ValueError("[dust] a_max only applies to initial = 'mrn'.")
+        return self
+
+
+class GridSection(_Section):
+    m_min: Optional[Pos] = None
+    m_max: Pos
+    bins_per_decade: Pos = 7.0
+
+
+class FragmentationSection(_Section):
+    model: Literal["shattering", "to_monomers"] = "shattering"
+    v_frag: Optional[Pos] = None
+    q: float = 11.0 / 6.0
+    probability: Literal["maxwellian", "sigmoid", "linear", "step"] = "maxwellian"
+    width: Optional[NonNeg] = None
+    crater_ratio: Pos = 10.0
+    chi: Pos = 1.0
+    m_frag: Optional[Pos] = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        need, other = ("v_frag", "m_frag") if self.model == "shattering" else ("m_frag", "v_frag")
+        unit = "cm/s" if need == "v_frag" else "g"
+        if getattr(self, need) is None:
+            raise ValueError(f"missing required parameter [fragmentation] {need} ({unit}) for model = {self.model!r}.")
+        if getattr(self, other) is not None:
+            raise ValueError(f"[fragmentation] {other} applies to model = "
+                             f"{'to_monomers' if other == 'm_frag' else 'shattering'!r} only.")
+        if self.model == "to_monomers":
+            for k in ("q", "probability", "width", "crater_ratio", "chi"):
+                if k in self.model_fields_set:
+                    raise ValueError(f"[fragmentation] {k} applies to model = 'shattering' only.")
+        return self
+
+
+class SolverSection(_Section):
+    scheme: Literal["twobin", "dg"] = "twobin"
+    order: NonNegInt = 0
+    method: Literal["auto", "kvaerno5", "tsit5", "linearly_implicit_euler"] = "auto"
+    rtol: Pos = 1e-6
+    atol: Pos = 1e-10
+    max_steps: PosInt = 100_000
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.scheme == "twobin" and self.order != 0:
+            raise ValueError(f"[solver] order = {self.order} needs scheme = 'dg'; the two-bin scheme is order 0.")
+        return self
+
+
+_DISTRIBUTION_KEYS = ("n_bins", "m_lo", "n_rezoom", "count_groups", "tail_events", "tail_wmax")
+
+
+class MCSection(_Section):
+    seed: NonNegInt = 0
+    grouping: Literal["none", "equal_mass", "distribution"] = "distribution"
+    n_bins: PosInt = 20
+    m_lo: Optional[Pos] = None
+    n_rezoom: Optional[PosInt] = None
+    count_groups: Optional[Annotated[float, Field(ge=1)]] = None
+    tail_events: NonNeg = 0.0
+    tail_wmax: Optional[Pos] = None
+    volume: Literal["constant_volume", "constant_number", "constant_species"] = "constant_volume"
+    controller: Optional[Literal["mass", "species"]] = None
+    ns_target: PosInt = 1000
+    n_particles: Optional[Pos] = None
+    f_eps: Pos = 1e-3
+    capacity: Optional[PosInt] = None
+    max_events: PosInt = 10 ** 8
+    rates: Literal["incremental", "full"] = "incremental"
+    n_refresh: Optional[PosInt] = None
+    neps_rounding: Literal["ceil", "floor"] = "ceil"
+    p_protect: NonNegInt = 16
+    dedupe: bool = True
+    merge_weighting: Literal["mass", "number", "volume"] = "mass"
+    leftover: Literal["demagnify", "stochastic"] = "demagnify"
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.grouping != "distribution":
+            for k in _DISTRIBUTION_KEYS:
+                if k in self.model_fields_set:
+                    raise ValueError(f"[mc] {k} applies to grouping = 'distribution' only (now {self.grouping!r}).")
+        if self.controller is not None and self.volume != "constant_species":
+            raise ValueError(f"[mc] controller applies to volume = 'constant_species' only (now {self.volume!r}).")
+        if self.n_refresh is not None and self.rates != "incremental":
+            raise ValueError("[mc] n_refresh applies to rates = 'incremental' only.")
+        if self.f_eps >= 1:
+            raise ValueError(f"[mc] f_eps must be < 1 (the largest fractional mass gain per group event), got "
+                             f"{self.f_eps!r}.")
+        return self
+
+
+class TimeSection(_Section):
+    t_end_yr: Optional[Pos] = None
+    n_out: PosInt = 12
+    spacing: Literal["log", "linear"] = "log"
+    t_first_yr: Optional[Pos] = None
+    t_out_yr: Optional[list[float]] = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.t_out_yr is not None:
+            for k in ("t_end_yr", "t_first_yr"):
+                if getattr(self, k) is not None:
+                    raise ValueError(f"[time] give either t_out_yr or t_end_yr/n_out/t_first_yr, not {k} too.")
+            to = self.t_out_yr
+            if len(to) < 1:
+                raise ValueError("[time] t_out_yr needs at least one output time (yr) after t = 0.")
+            if not to[0] > 0:
+                raise ValueError(f"[time] t_out_yr must be > 0 (the run starts at t = 0); got {to[0]!r}.")
+            if not all(b > a for a, b in zip(to[:-1], to[1:])):
+                raise ValueError(f"[time] t_out_yr must be strictly increasing; got {to!r}.")
+        else:
+            if self.t_end_yr is None:
+                raise ValueError("missing required parameter [time] t_end_yr (or t_out_yr).")
+            if self.t_first_yr is not None and not self.t_first_yr < self.t_end_yr:
+                raise ValueError(f"[time] t_first_yr = {self.t_first_yr!r} must be < t_end_yr = {self.t_end_yr!r}.")
+        return self
+
+
+class OutputSection(_Section):
+    path: str = "jaxcoag_out/run.nc"
+    figure: bool = True
+    checkpoint: str = ""
+
+
+class _Schema(BaseModel):
+    """The whole file: one field per section (the section order is the order written)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    run: RunSection = RunSection()
+    scene: SceneSection = SceneSection()
+    gas: GasSection
+    dust: DustSection
+    grid: GridSection
+    fragmentation: Optional[FragmentationSection] = None
+    solver: SolverSection = SolverSection()
+    mc: MCSection = MCSection()
+    time: TimeSection
+    output: OutputSection = OutputSection()
+
+    @model_validator(mode="after")
+    def _cross(self):
+        du, gr = self.dust, self.grid
+        m0 = du.m0 if du.m0 is not None else 4.0 / 3.0 * math.pi * du.rho_s * du.a0 ** 3
+        bpd = gr.bins_per_decade
+        m_min = gr.m_min if gr.m_min is not None else m0 / 10 ** (0.5 / bpd)
+        if not gr.m_max > m_min:
+            raise ValueError(f"[grid] m_max = {gr.m_max!r} g must exceed m_min = {m_min:.4g} g.")
+        nb = int(round(math.log10(gr.m_max / m_min) * bpd))
+        if nb < 2:
+            raise ValueError(f"[grid] [m_min, m_max] at bins_per_decade = {bpd:g} gives {nb} bin(s); a grid needs at "
+                             "least 2 bins. Increase bins_per_decade or widen [m_min, m_max].")
+        if not m_min <= m0 < gr.m_max:
+            raise ValueError(f"[dust] monomer mass m0 = {m0:.4g} g lies outside the grid [{m_min:.4g}, "
+                             f"{gr.m_max:.4g}] g; change [grid] m_min/m_max.")
+        if self.run.engine == "mc" and self.mc.n_particles is None:
+            raise ValueError("missing required parameter [mc] n_particles (physical particles in the simulated volume "
+                             "at t = 0, e.g. 1e30; up to 1e160 with grouping) for [run] engine = 'mc'.")
+        return self
+
+
+#: section name -> its model class (the schema)
+SECTIONS = {name: _section_class for name, _section_class in
+            ((n, typing.get_args(f.annotation)[0] if typing.get_args(f.annotation) else f.annotation)
+             for n, f in _Schema.model_fields.items())}
+
+#: sections that must be present in a file
+REQUIRED_SECTIONS = tuple(n for n, f in _Schema.model_fields.items() if f.is_required())
 
 #: scalar parameters a sweep may vary (they enter the compiled solve as array leaves)
 SWEEPABLE = ("gas.R_au", "gas.alpha", "gas.z_H", "gas.M_star_msun", "gas.rho_X", "gas.Sigma_g", "gas.T", "gas.n",
@@ -166,92 +383,146 @@ SWEEPABLE = ("gas.R_au", "gas.alpha", "gas.z_H", "gas.M_star_msun", "gas.rho_X",
 
 
 def _suggest(word, options):
-    m = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
-    return f" Did you mean {m[0]!r}?" if m else ""
+    """" Did you mean 'x'?" for the closest option (difflib ratio >= 0.6, or the only option that
+    starts with ``word``), else ""."""
+    opts = [str(o) for o in options]
+    m = difflib.get_close_matches(str(word), opts, n=1, cutoff=0.6)
+    if not m:
+        m = [o for o in opts if str(word) and o.startswith(str(word))]
+    return f" Did you mean {m[0]!r}?" if len(m) == 1 else ""
 
 
-def _where(section, key):
-    return f"[{section}] {key}"
+def _allowed(section, key):
+    """The allowed strings of a Literal-typed key (or None)."""
+    ann = SECTIONS[section].model_fields[key].annotation
+    for a in (ann, *typing.get_args(ann)):
+        if typing.get_origin(a) is Literal:
+            return list(typing.get_args(a))
+    return None
 
 
-def _coerce(section, key, value):
-    typ, _, chk = SCHEMA[section][key]
-    w = _where(section, key)
-    if typ is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise JaxcoagInputError(f"{w} must be a number, got {value!r} ({type(value).__name__}).")
-        v = float(value)
-        if not math.isfinite(v):
-            raise JaxcoagInputError(f"{w} must be finite, got {value!r}.")
-        if chk == "pos" and not v > 0:
-            raise JaxcoagInputError(f"{w} must be > 0, got {value!r}.")
-        if chk == "nonneg" and not v >= 0:
-            raise JaxcoagInputError(f"{w} must be >= 0, got {value!r}.")
-        return v
-    if typ is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise JaxcoagInputError(f"{w} must be an integer, got {value!r} ({type(value).__name__}).")
-        if chk == "pos" and not value > 0:
-            raise JaxcoagInputError(f"{w} must be > 0, got {value!r}.")
-        if chk == "nonneg" and not value >= 0:
-            raise JaxcoagInputError(f"{w} must be >= 0, got {value!r}.")
-        return int(value)
-    if typ is bool:
-        if not isinstance(value, bool):
-            raise JaxcoagInputError(f"{w} must be true or false, got {value!r}.")
-        return value
-    if typ is str:
-        if not isinstance(value, str):
-            raise JaxcoagInputError(f"{w} must be a string, got {value!r} ({type(value).__name__}).")
-        if isinstance(chk, tuple) and value not in chk:
-            raise JaxcoagInputError(f"{w} = {value!r} is not one of {list(chk)}.{_suggest(value, chk)}")
-        return value
-    if typ == "str_list":
-        if not isinstance(value, list) or not all(isinstance(s, str) for s in value):
-            raise JaxcoagInputError(f"{w} must be a list of strings, got {value!r}.")
-        return list(value)
-    if typ == "float_list":
-        if not isinstance(value, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                   for x in value):
-            raise JaxcoagInputError(f"{w} must be a list of numbers, got {value!r}.")
-        out = [float(x) for x in value]
-        if not all(math.isfinite(x) for x in out):
-            raise JaxcoagInputError(f"{w} must hold finite numbers, got {value!r}.")
-        return out
-    raise AssertionError(typ)  # pragma: no cover
+def _message(err: dict, source: str) -> str:
+    """One line for one pydantic error, naming ``[section] key`` first."""
+    loc, typ, val = tuple(err["loc"]), err["type"], err.get("input")
+    s = str(loc[0]) if loc else None
+    k = str(loc[1]) if len(loc) > 1 else None
+    w = f"[{s}] {k}"
+    if typ == "value_error":
+        return str(err["ctx"]["error"])
+    if typ == "extra_forbidden":
+        if k is None:
+            return f"unknown section [{s}] in {source}; allowed sections: {list(SECTIONS)}.{_suggest(s, SECTIONS)}"
+        keys = list(SECTIONS[s].model_fields)
+        return f"unknown key {k!r} in section [{s}] of {source}; allowed keys: {keys}.{_suggest(k, keys)}"
+    if typ == "missing":
+        if k is None:
+            need = [n for n, f in SECTIONS[s].model_fields.items() if f.is_required()]
+            return f"missing section [{s}] in {source}; it needs at least the keys {need}."
+        return f"missing required parameter {w} in {source}."
+    if typ in ("model_type", "model_attributes_type", "dict_type"):
+        return f"[{s}] must be a table of key = value pairs (got {val!r})."
+    if len(loc) > 2:  # an element of a list
+        kind = "numbers" if _is_float_list(s, k) else "strings"
+        if typ == "finite_number":
+            return f"{w} must hold finite numbers, got {val!r}."
+        return f"{w} must be a list of {kind}, got element {val!r}."
+    if typ == "list_type":
+        kind = "numbers" if _is_float_list(s, k) else "strings"
+        return f"{w} must be a list of {kind}, got {val!r}."
+    if typ in ("float_type", "float_parsing"):
+        return f"{w} must be a number, got {val!r} ({type(val).__name__})."
+    if typ in ("int_type", "int_parsing", "int_from_float"):
+        return f"{w} must be an integer, got {val!r} ({type(val).__name__})."
+    if typ == "bool_type":
+        return f"{w} must be true or false, got {val!r}."
+    if typ == "string_type":
+        return f"{w} must be a string, got {val!r} ({type(val).__name__})."
+    if typ == "finite_number":
+        return f"{w} must be finite, got {val!r}."
+    if typ == "greater_than":
+        return f"{w} must be > {err['ctx']['gt']:g}, got {val!r}."
+    if typ == "greater_than_equal":
+        return f"{w} must be >= {err['ctx']['ge']:g}, got {val!r}."
+    if typ == "literal_error":
+        opts = _allowed(s, k) or [err["ctx"].get("expected")]
+        return f"{w} = {val!r} is not one of {opts}.{_suggest(val, opts)}"
+    return f"{w}: {err['msg']} (got {val!r})."  # pragma: no cover - a pydantic error type not met above
 
 
-@dataclasses.dataclass(frozen=True)
+def _is_float_list(section, key):
+    return "float" in str(SECTIONS[section].model_fields[key].annotation)
+
+
+def _first_error(exc: pydantic.ValidationError, source: str) -> str:
+    """The message of the most basic error: unknown names first, then a missing section, then a
+    missing key, then values (in file order within each kind)."""
+
+    def rank(e):
+        if e["type"] == "extra_forbidden":
+            return 0
+        if e["type"] == "missing":
+            return 1 if len(e["loc"]) == 1 else 2
+        return 3
+
+    errs = exc.errors(include_url=False)
+    return _message(min(errs, key=rank), source)
+
+
 class RunConfig:
     """A validated run configuration.
 
     Attributes:
-        data: dict section -> dict key -> value, every key of :data:`SCHEMA` present (computed
-            defaults filled in; absent optional values are None); ``data["fragmentation"]`` is
-            None for pure growth.
+        model: the pydantic schema instance (``model.gas.alpha`` ...; what the user gave plus defaults).
+        data: dict section -> dict key -> value, every key present, computed defaults filled in
+            (the monomer ``m0``/``a0``, the grid's ``m_min``, the preset, the cloud's T; absent optional
+            values are None); ``data["fragmentation"]`` is None for pure growth. ``cfg[section]``
+            is ``data[section]``.
         source: where it came from (file path, "<default>" or "<dict>").
-        explicit: the values given explicitly (validated), section -> key -> value; this is what
-            :meth:`to_toml` writes, so a saved config round-trips through :func:`loads`.
     """
 
-    data: dict
-    source: str = "<dict>"
-    explicit: dict = dataclasses.field(default_factory=dict)
+    def __init__(self, model: _Schema, source: str = "<dict>"):
+        self.model = model
+        self.source = source
+        self.data = _resolve(model)
 
     def __getitem__(self, section):
         return self.data[section]
+
+    def __eq__(self, other):
+        return isinstance(other, RunConfig) and self.data == other.data
+
+    def __repr__(self):
+        return f"RunConfig({self.data['run']['name']!r}, engine={self.engine!r}, source={self.source!r})"
+
+    @property
+    def engine(self) -> str:
+        """``[run] engine``: "binned" or "mc"."""
+        return self.data["run"]["engine"]
 
     @property
     def has_fragmentation(self) -> bool:
         return self.data["fragmentation"] is not None
 
+    @property
+    def explicit(self) -> dict:
+        """The values given explicitly (validated): section -> key -> value."""
+        return self.model.model_dump(exclude_unset=True, exclude_none=True)
+
+    def raw(self) -> dict:
+        """The explicit values as a plain nested dict, suitable for :func:`from_dict`."""
+        return copy.deepcopy(self.explicit)
+
     def to_toml(self) -> str:
-        """The configuration as TOML text (the explicit values; round-trips through :func:`loads`)."""
+        """The configuration as TOML text (the explicit values, written by tomli-w; round-trips
+        through :func:`loads`)."""
         return to_toml(self.explicit)
 
     def physics_hash(self) -> str:
-        """sha256 of everything that determines the solution (all sections but [run], [output])."""
-        d = {k: v for k, v in self.data.items() if k not in ("run", "output")}
+        """sha256 of everything that determines the solution: the engine and the sections it reads
+        (all but [run], [output] and the other engine's [solver] / [mc])."""
+        skip = ("run", "output", "mc" if self.engine == "binned" else "solver")
+        d = {k: v for k, v in self.data.items() if k not in skip}
+        d["engine"] = self.engine
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=repr).encode()).hexdigest()
 
     def replace(self, **dotted) -> "RunConfig":
@@ -261,9 +532,28 @@ class RunConfig:
             set_value(raw, k, v)
         return from_dict(raw, source=self.source)
 
-    def raw(self) -> dict:
-        """The explicit (non-None) values as a plain nested dict, suitable for :func:`from_dict`."""
-        return copy.deepcopy(self.explicit)
+
+def _resolve(m: _Schema) -> dict:
+    """Every section as a dict with the computed defaults filled in."""
+    data = {name: (None if getattr(m, name) is None else getattr(m, name).model_dump()) for name in SECTIONS}
+    sc = data["scene"]
+    if sc["preset"] is None and sc["effects"] is None:
+        sc["preset"] = "nebula_ch4"
+    g = data["gas"]
+    if g["model"] == "molecular_cloud" and g["T"] is None:
+        g["T"] = 10.0
+    du = data["dust"]
+    if du["m0"] is None:
+        du["m0"] = 4.0 / 3.0 * math.pi * du["rho_s"] * du["a0"] ** 3
+    else:
+        du["a0"] = (3.0 * du["m0"] / (4.0 * math.pi * du["rho_s"])) ** (1.0 / 3.0)
+    gr = data["grid"]
+    if gr["m_min"] is None:
+        gr["m_min"] = du["m0"] / 10 ** (0.5 / gr["bins_per_decade"])
+    mc = data["mc"]
+    if mc["volume"] == "constant_species" and mc["controller"] is None:
+        mc["controller"] = "mass" if mc["grouping"] == "equal_mass" else "species"
+    return data
 
 
 def set_value(raw: dict, dotted: str, value):
@@ -271,168 +561,29 @@ def set_value(raw: dict, dotted: str, value):
     if "." not in dotted:
         raise JaxcoagInputError(f"parameter {dotted!r} must be written as section.key, e.g. gas.alpha.")
     s, k = dotted.split(".", 1)
-    if s not in SCHEMA:
-        raise JaxcoagInputError(f"unknown section [{s}] in {dotted!r}; sections: {list(SCHEMA)}.{_suggest(s, SCHEMA)}")
-    if k not in SCHEMA[s]:
-        raise JaxcoagInputError(f"unknown key {k!r} in section [{s}]; allowed keys: {list(SCHEMA[s])}."
-                                f"{_suggest(k, SCHEMA[s])}")
+    if s not in SECTIONS:
+        raise JaxcoagInputError(f"unknown section [{s}] in {dotted!r}; sections: {list(SECTIONS)}."
+                                f"{_suggest(s, SECTIONS)}")
+    keys = list(SECTIONS[s].model_fields)
+    if k not in keys:
+        raise JaxcoagInputError(f"unknown key {k!r} in section [{s}]; allowed keys: {keys}.{_suggest(k, keys)}")
     raw.setdefault(s, {})[k] = value
 
 
 def from_dict(d: dict, *, source: str = "<dict>") -> RunConfig:
     """Validate a nested dict section -> key -> value and fill defaults.
 
-    Raises JaxcoagInputError for an unknown section/key, a missing required section or key,
-    a value of the wrong type or out of range, and inconsistent combinations.
+    Raises JaxcoagInputError (one line naming ``[section] key``) for an unknown section/key, a
+    missing required section or key, a value of the wrong type or out of range, and inconsistent
+    combinations.
     """
     if not isinstance(d, dict):
         raise JaxcoagInputError(f"a run configuration must be a table of sections, got {type(d).__name__}.")
-    for s, sec in d.items():
-        if s not in SCHEMA:
-            raise JaxcoagInputError(f"unknown section [{s}] in {source}; allowed sections: {list(SCHEMA)}."
-                                    f"{_suggest(s, SCHEMA)}")
-        if not isinstance(sec, dict):
-            raise JaxcoagInputError(f"[{s}] must be a table of key = value pairs (got {sec!r}).")
-        for k in sec:
-            if k not in SCHEMA[s]:
-                raise JaxcoagInputError(f"unknown key {k!r} in section [{s}] of {source}; allowed keys: "
-                                        f"{list(SCHEMA[s])}.{_suggest(k, SCHEMA[s])}")
-    for s in REQUIRED_SECTIONS:
-        if s not in d:
-            raise JaxcoagInputError(f"missing section [{s}] in {source}; it needs at least the keys "
-                                    f"{[k for k, v in SCHEMA[s].items() if v[1] is _REQ] or list(SCHEMA[s])[:3]}.")
-    data, explicit = {}, {}
-    for s, keys in SCHEMA.items():
-        if s == "fragmentation" and s not in d:
-            data[s] = None
-            continue
-        given = d.get(s, {})
-        sec = {}
-        for k, (typ, dflt, chk) in keys.items():
-            if k in given:
-                sec[k] = _coerce(s, k, given[k])
-                explicit.setdefault(s, {})[k] = copy.deepcopy(sec[k])
-            elif dflt is _REQ:
-                raise JaxcoagInputError(f"missing required parameter {_where(s, k)} in {source}.")
-            else:
-                sec[k] = dflt
-        data[s] = sec
-        if s in d:
-            explicit.setdefault(s, {})
-    _cross_checks(data, source)
-    return RunConfig(data=data, source=source, explicit=explicit)
-
-
-def _cross_checks(data, source):
-    sc = data["scene"]
-    if sc["preset"] is not None and sc["effects"] is not None:
-        raise JaxcoagInputError("[scene] give either preset or effects, not both.")
-    if sc["preset"] is None and sc["effects"] is None:
-        sc["preset"] = "nebula_ch4"
-    if sc["preset"] is not None:
-        from .scenes import PRESETS
-        if sc["preset"] not in PRESETS:
-            raise JaxcoagInputError(f"[scene] preset = {sc['preset']!r} is not a preset; choose one of "
-                                    f"{sorted(PRESETS)}.{_suggest(sc['preset'], PRESETS)}")
-    else:
-        eff = sc["effects"]
-        if not eff:
-            raise JaxcoagInputError("[scene] effects is empty; list at least one of " f"{list(EFFECT_NAMES)}.")
-        for e in eff:
-            if e not in EFFECT_NAMES:
-                raise JaxcoagInputError(f"[scene] effects: unknown effect {e!r}; choose from {list(EFFECT_NAMES)}."
-                                        f"{_suggest(e, EFFECT_NAMES)}")
-        dup = sorted({e for e in eff if eff.count(e) > 1})
-        if dup:
-            raise JaxcoagInputError(f"[scene] effects lists {dup} more than once; the effects are incompatible "
-                                    "(each is added once in quadrature). Keep one of each.")
-
-    g = data["gas"]
-    model = g["model"]
-    allowed = _DISK_KEYS[model]
-    for k in ("R_au", "alpha", "Sigma_g", "T", "n", "rho_X"):
-        if g[k] is not None and k not in allowed and not (k == "rho_X" and g[k] == 1.0):
-            raise JaxcoagInputError(f"[gas] {k} does not apply to model = {model!r}; its keys are {list(allowed)}.")
-    if model == "molecular_cloud":
-        for k, dflt in (("z_H", 0.0), ("M_star_msun", 1.0)):
-            if g[k] != dflt:
-                raise JaxcoagInputError(f"[gas] {k} does not apply to model = 'molecular_cloud' "
-                                        f"(a homogeneous core); its keys are {list(allowed)}.")
-        if g["T"] is None:
-            g["T"] = 10.0
-    for k in _GAS_REQUIRED[model]:
-        if g[k] is None:
-            raise JaxcoagInputError(f"missing required parameter [gas] {k} for model = {model!r} in {source}.")
-
-    du = data["dust"]
-    if du["a0"] is None and du["m0"] is None:
-        raise JaxcoagInputError(f"missing required parameter [dust] a0 (monomer radius, cm) or m0 (monomer mass, g) "
-                                f"in {source}.")
-    if du["a0"] is not None and du["m0"] is not None:
-        raise JaxcoagInputError("[dust] give exactly one of a0 (monomer radius, cm) or m0 (monomer mass, g), not both.")
-    if du["m0"] is None:
-        du["m0"] = 4.0 / 3.0 * math.pi * du["rho_s"] * du["a0"] ** 3
-    else:
-        du["a0"] = (3.0 * du["m0"] / (4.0 * math.pi * du["rho_s"])) ** (1.0 / 3.0)
-    if du["initial"] == "mrn":
-        if du["a_max"] is None:
-            raise JaxcoagInputError("missing required parameter [dust] a_max (largest MRN grain, cm) for "
-                                    "initial = 'mrn'.")
-        if not du["a_max"] > du["a0"]:
-            raise JaxcoagInputError(f"[dust] a_max = {du['a_max']!r} cm must exceed a0 = {du['a0']:.4g} cm.")
-    elif du["a_max"] is not None:
-        raise JaxcoagInputError("[dust] a_max only applies to initial = 'mrn'.")
-
-    gr = data["grid"]
-    bpd = gr["bins_per_decade"]
-    if gr["m_min"] is None:
-        gr["m_min"] = du["m0"] / 10 ** (0.5 / bpd)
-    if not gr["m_max"] > gr["m_min"]:
-        raise JaxcoagInputError(f"[grid] m_max = {gr['m_max']!r} g must exceed m_min = {gr['m_min']:.4g} g.")
-    nb = int(round(math.log10(gr["m_max"] / gr["m_min"]) * bpd))
-    if nb < 2:
-        raise JaxcoagInputError(f"[grid] [m_min, m_max] at bins_per_decade = {bpd:g} gives {nb} bin(s); a grid needs "
-                                "at least 2 bins. Increase bins_per_decade or widen [m_min, m_max].")
-    if not gr["m_min"] <= du["m0"] < gr["m_max"]:
-        raise JaxcoagInputError(f"[dust] monomer mass m0 = {du['m0']:.4g} g lies outside the grid "
-                                f"[{gr['m_min']:.4g}, {gr['m_max']:.4g}] g; change [grid] m_min/m_max.")
-
-    fr = data["fragmentation"]
-    if fr is not None:
-        if fr["model"] == "shattering":
-            if fr["v_frag"] is None:
-                raise JaxcoagInputError("missing required parameter [fragmentation] v_frag (cm/s) for "
-                                        "model = 'shattering'.")
-            if fr["m_frag"] is not None:
-                raise JaxcoagInputError("[fragmentation] m_frag applies to model = 'to_monomers' only.")
-        else:
-            if fr["m_frag"] is None:
-                raise JaxcoagInputError("missing required parameter [fragmentation] m_frag (g) for "
-                                        "model = 'to_monomers'.")
-            if fr["v_frag"] is not None:
-                raise JaxcoagInputError("[fragmentation] v_frag applies to model = 'shattering' only.")
-
-    so = data["solver"]
-    if so["scheme"] == "twobin" and so["order"] != 0:
-        raise JaxcoagInputError(f"[solver] order = {so['order']} needs scheme = 'dg'; the two-bin scheme is order 0.")
-
-    t = data["time"]
-    if t["t_out_yr"] is not None:
-        for k in ("t_end_yr", "t_first_yr"):
-            if t[k] is not None:
-                raise JaxcoagInputError(f"[time] give either t_out_yr or t_end_yr/n_out/t_first_yr, not {k} too.")
-        to = t["t_out_yr"]
-        if len(to) < 1:
-            raise JaxcoagInputError("[time] t_out_yr needs at least one output time (yr) after t = 0.")
-        if not to[0] > 0:
-            raise JaxcoagInputError(f"[time] t_out_yr must be > 0 (the run starts at t = 0); got {to[0]!r}.")
-        if not all(b > a for a, b in zip(to[:-1], to[1:])):
-            raise JaxcoagInputError(f"[time] t_out_yr must be strictly increasing; got {to!r}.")
-    else:
-        if t["t_end_yr"] is None:
-            raise JaxcoagInputError(f"missing required parameter [time] t_end_yr (or t_out_yr) in {source}.")
-        if t["t_first_yr"] is not None and not t["t_first_yr"] < t["t_end_yr"]:
-            raise JaxcoagInputError(f"[time] t_first_yr = {t['t_first_yr']!r} must be < t_end_yr = {t['t_end_yr']!r}.")
+    try:
+        model = _Schema.model_validate(d)
+    except pydantic.ValidationError as e:
+        raise JaxcoagInputError(_first_error(e, source)) from None
+    return RunConfig(model, source=source)
 
 
 def output_times_s(cfg: RunConfig) -> np.ndarray:
@@ -472,52 +623,39 @@ def load(path) -> RunConfig:
     return loads(text, source=p)
 
 
-def default_path() -> str:
-    """Path of the shipped default configuration ``jaxcoag/data/default_run.toml``."""
-    return str(resources.files("jaxcoag").joinpath("data", "default_run.toml"))
+_DEFAULT_FILES = {"binned": "default_run.toml", "mc": "default_mc_run.toml"}
 
 
-def default() -> RunConfig:
-    """The built-in default run (protoplanetary disk at 1 AU, growth + fragmentation)."""
-    cfg = load(default_path())
-    return dataclasses.replace(cfg, source="<default>")
+def default_path(engine: str = "binned") -> str:
+    """Path of a shipped default configuration: ``jaxcoag/data/default_run.toml`` (binned) or
+    ``jaxcoag/data/default_mc_run.toml`` (Monte Carlo)."""
+    if engine not in _DEFAULT_FILES:
+        raise JaxcoagInputError(f"engine = {engine!r} is not one of {list(ENGINES)}.{_suggest(engine, ENGINES)}")
+    return str(resources.files("jaxcoag").joinpath("data", _DEFAULT_FILES[engine]))
 
 
-def _fmt(v):
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(_fmt(x) for x in v) + "]"
-    raise TypeError(type(v))  # pragma: no cover
+def default(engine: str = "binned") -> RunConfig:
+    """The built-in default run (protoplanetary disk at 1 AU, growth + fragmentation) of an engine."""
+    cfg = load(default_path(engine))
+    cfg.source = "<default>" if engine == "binned" else f"<default {engine}>"
+    return cfg
 
 
 def to_toml(data: dict) -> str:
-    """TOML text of a config data dict (None values are left out; a None section is omitted)."""
-    lines = []
-    for s, sec in data.items():
-        if sec is None:
-            continue
-        lines.append(f"[{s}]")
-        for k, v in sec.items():
-            if v is not None:
-                lines.append(f"{k} = {_fmt(v)}")
-        lines.append("")
-    return "\n".join(lines)
+    """TOML text (tomli-w) of a section -> key -> value dict (None values and None sections are left out)."""
+    clean = {s: {k: v for k, v in sec.items() if v is not None} for s, sec in data.items() if sec is not None}
+    return tomli_w.dumps(clean)
 
 
 # ------------------------------------------------------------------------------------ build
 class Built:
     """Everything a run needs, built and checked from a config (see :func:`build`).
 
-    Attributes: cfg, scene (Scene), gas (GasState), kernel (SceneKernel), grid (MassGrid),
-    n0 (numpy number density per bin [cm^-3]), fragmentation (model or None), ts (output times
-    [s]), solver (diffrax solver or the string "kvaerno5"), rtol, atol, max_steps, scheme, order.
+    Attributes: cfg, scene (Scene), gas (GasState), kernel (SceneKernel), grid (MassGrid; the
+    binned engine's grid and the output bins of every engine), n0 (numpy number density per bin
+    [cm^-3]), outcome (a ``jaxcoag.outcomes`` object or None), t_out (output times [s], starting at
+    t = 0), engine (``jaxcoag.Binned`` / ``jaxcoag.MonteCarlo``), initial (the initial condition
+    passed to :func:`jaxcoag.evolve`), key (PRNG key of the Monte Carlo engine, else None).
     """
 
     def __init__(self, **kw):
@@ -526,6 +664,8 @@ class Built:
 
 def make_scene(cfg: RunConfig):
     """The :class:`~jaxcoag.Scene` of a config."""
+    import dataclasses
+
     from . import effects as E
     from . import scenes
     from .scene import Scene
@@ -538,13 +678,11 @@ def make_scene(cfg: RunConfig):
             # keep the preset's other fields (outcome, porosity, ...); set only what [scene] names
             return dataclasses.replace(base, focusing=sc["focusing"], drag_regime=sc["drag_regime"],
                                        drag_convention=sc["drag_convention"])
-        else:
-            ctor = {"brownian": E.Brownian, "radial_drift": E.RadialDrift, "azimuthal_drift": E.AzimuthalDrift,
-                    "settling": E.Settling}
-            vel = tuple(E.TurbulenceOC07(method=meth or "exact") if e == "turbulence_oc07" else ctor[e]()
-                        for e in sc["effects"])
-            name = "custom"
-        return Scene(velocities=vel, focusing=sc["focusing"], drag_regime=sc["drag_regime"], name=name,
+        ctor = {"brownian": E.Brownian, "radial_drift": E.RadialDrift, "azimuthal_drift": E.AzimuthalDrift,
+                "settling": E.Settling}
+        vel = tuple(E.TurbulenceOC07(method=meth or "exact") if e == "turbulence_oc07" else ctor[e]()
+                    for e in sc["effects"])
+        return Scene(velocities=vel, focusing=sc["focusing"], drag_regime=sc["drag_regime"], name="custom",
                      drag_convention=sc["drag_convention"])
     except (ValueError, TypeError, KeyError) as e:
         raise JaxcoagInputError(f"[scene] {e}") from e
@@ -573,20 +711,26 @@ def make_gas(g: dict, **over):
     return at(g["z_H"] * at(0.0).H_g)
 
 
-def make_fragmentation(fr: dict | None, **over):
-    """Binned fragmentation model of a [fragmentation] section (None = pure growth)."""
-    from .binned import Shattering, ShatterToMonomers
+def make_outcome(fr: dict | None, m0=None, engine="binned", **over):
+    """The collision outcome (``jaxcoag.outcomes``) of a [fragmentation] section; None = pure growth.
+
+    ``model = "shattering"`` -> :class:`jaxcoag.outcomes.Shattering` (Birnstiel et al. 2010 / DustPy
+    shattering + cratering; binned: fragments from the grid bottom, Monte Carlo: from the monomer
+    mass ``m0`` [g]); ``"to_monomers"`` -> :class:`jaxcoag.outcomes.ShatterAbove` (thesis §5.3.4: a
+    product above m_frag shatters into monomers of mass ``m0`` [g])."""
+    from . import outcomes as O
 
     if fr is None:
         return None
     fr = dict(fr, **over)
     if fr["model"] == "to_monomers":
-        return ShatterToMonomers(fr["m_frag"])
-    return Shattering(fr["v_frag"], q=fr["q"], probability=fr["probability"], width=fr["width"],
-                      crater_ratio=fr["crater_ratio"], chi=fr["chi"])
+        return O.ShatterAbove(fr["m_frag"], m0)
+    return O.Shattering(fr["v_frag"], q=fr["q"], probability=fr["probability"], width=fr["width"],
+                        crater_ratio=fr["crater_ratio"], chi=fr["chi"], m_lo=m0 if engine == "mc" else None)
 
 
 def make_grid(cfg: RunConfig):
+    """The :class:`~jaxcoag.MassGrid` of [grid] (log-spaced, ``bins_per_decade``)."""
     from .binned import MassGrid
 
     gr = cfg["grid"]
@@ -595,7 +739,7 @@ def make_grid(cfg: RunConfig):
 
 def initial_number(cfg: RunConfig, grid, rho_g) -> np.ndarray:
     """Initial number density per bin [cm^-3] (numpy) for gas density rho_g [g cm^-3]."""
-    from .binned import monodisperse, mrn
+    from .binned.grid import monodisperse, mrn
 
     du = cfg["dust"]
     rho_d = du["dust_to_gas"] * float(rho_g)
@@ -604,19 +748,92 @@ def initial_number(cfg: RunConfig, grid, rho_g) -> np.ndarray:
     return monodisperse(grid, du["m0"], rho_d)
 
 
-def make_solver(cfg: RunConfig):
-    """diffrax solver (or "kvaerno5", built with a Newton root finder inside solve_binned)."""
+def _binned_solver(cfg: RunConfig, rho_d):
+    """diffrax solver of [solver] method (None = the engine's automatic choice: Tsit5 for pure growth,
+    Kvaerno5 + Newton with fragmentation); rho_d [g cm^-3] is the total dust mass the Newton
+    tolerance of an explicitly asked Kvaerno5 refers to (as the engine's own, 1e-3 atol M_tot)."""
     import diffrax
+    import optimistix as optx
+
     from .binned import LinearlyImplicitEuler
 
-    m = cfg["solver"]["method"]
-    if m == "auto":
-        return "kvaerno5" if cfg.has_fragmentation else diffrax.Tsit5()
+    so = cfg["solver"]
+    m = so["method"]
     if m == "tsit5":
         return diffrax.Tsit5()
     if m == "linearly_implicit_euler":
         return LinearlyImplicitEuler()
-    return "kvaerno5"
+    if m == "kvaerno5" and not cfg.has_fragmentation:
+        return diffrax.Kvaerno5(root_finder=optx.Newton(rtol=so["rtol"], atol=1e-3 * so["atol"] * rho_d))
+    return None
+
+
+def _mc_engine(cfg: RunConfig):
+    """``jaxcoag.MonteCarlo`` of the [mc] section (n_particles only for a monodisperse start; an MRN
+    start brings its own multiplicities, :func:`initial_state`)."""
+    from . import mc
+
+    s = cfg["mc"]
+    if s["grouping"] == "none":
+        grouping = None
+    elif s["grouping"] == "equal_mass":
+        grouping = mc.EqualMass()
+    else:
+        grouping = mc.Distribution(n_bins=s["n_bins"], m_lo=s["m_lo"], n_rezoom=s["n_rezoom"],
+                                   count_groups=s["count_groups"], tail_events=s["tail_events"],
+                                   tail_wmax=s["tail_wmax"])
+    if s["volume"] == "constant_volume":
+        volume = mc.ConstantVolume()
+    elif s["volume"] == "constant_number":
+        volume = mc.ConstantNumber()
+    else:
+        volume = mc.ConstantSpecies(controller=mc.MassController() if s["controller"] == "mass" else
+                                    mc.SpeciesController())
+    rates = mc.IncrementalRates(n_refresh=s["n_refresh"]) if s["rates"] == "incremental" else mc.FullRates()
+    n_part = s["n_particles"] if cfg["dust"]["initial"] == "monodisperse" else None
+    return mc.MonteCarlo(grouping=grouping, volume=volume, ns_target=float(s["ns_target"]), n_particles=n_part,
+                         f_eps=s["f_eps"], capacity=s["capacity"], max_events=s["max_events"], rates=rates,
+                         neps_rounding=s["neps_rounding"], p_protect=s["p_protect"], dedupe=s["dedupe"],
+                         merge_weighting=s["merge_weighting"], leftover=s["leftover"])
+
+
+def make_engine(cfg: RunConfig, grid=None, rho_d=None):
+    """The engine object of ``[run] engine``: ``jaxcoag.Binned`` from [grid] + [solver], or
+    ``jaxcoag.MonteCarlo`` from [mc]. ``rho_d``: dust mass density [g cm^-3] (default from the
+    config's gas), the mass scale of an explicit Kvaerno5's Newton tolerance."""
+    if cfg.engine == "mc":
+        return _mc_engine(cfg)
+    from .binned import Binned, DGScheme, TwoBinScheme
+
+    so = cfg["solver"]
+    scheme = TwoBinScheme() if so["scheme"] == "twobin" else DGScheme(order=so["order"])
+    if rho_d is None:
+        rho_d = cfg["dust"]["dust_to_gas"] * float(make_gas(cfg["gas"]).rho_g)
+    return Binned(grid if grid is not None else make_grid(cfg), scheme=scheme, solver=_binned_solver(cfg, rho_d),
+                  rtol=so["rtol"], atol=so["atol"], max_steps=so["max_steps"])
+
+
+def initial_state(cfg: RunConfig, grid, rho_g):
+    """The initial condition for :func:`jaxcoag.evolve` of the config's engine at gas density rho_g.
+
+    Binned: the number density per bin [cm^-3] (monodisperse in the monomer's bin, or MRN). Monte
+    Carlo: ``Monodisperse(m0, rho_d)`` with rho_d = dust_to_gas rho_g, or for an MRN start the
+    species of the MRN bins (``jaxcoag.mc.initial_species``, number per bin in the volume of
+    ``[mc] n_particles`` monomer masses)."""
+    from ._engine import Monodisperse
+
+    du = cfg["dust"]
+    rho_d = du["dust_to_gas"] * float(rho_g)
+    if cfg.engine == "binned":
+        return initial_number(cfg, grid, rho_g)
+    if du["initial"] == "monodisperse":
+        return Monodisperse(du["m0"], rho_d)
+    from . import mc
+
+    n = initial_number(cfg, grid, rho_g)
+    keep = n > 0
+    V = cfg["mc"]["n_particles"] * du["m0"] / rho_d  # [cm^3]
+    return mc.initial_species(np.asarray(grid.centers)[keep], g=n[keep] * V, V=V)
 
 
 def n_bins(cfg: RunConfig) -> int:
@@ -628,10 +845,11 @@ def n_bins(cfg: RunConfig) -> int:
 
 def check_memory(cfg: RunConfig):
     """Refuse (JaxcoagInputError naming [grid] bins_per_decade) a config whose grid and scheme
-    tensors would not fit in memory, before any array is allocated: the estimate of
+    tensors would not fit in memory, before any array is allocated: the grid itself against
+    :func:`jaxcoag.binned.grid.memory_limit_bytes` and, for the binned engine, the estimate of
     :func:`jaxcoag.binned.scheme.estimate_bytes` for [solver] scheme/order, fragmentation and an
-    implicit method ("auto" with fragmentation, "kvaerno5", "linearly_implicit_euler") against
-    :func:`jaxcoag.binned.grid.memory_limit_bytes`. Returns the estimate [bytes]."""
+    implicit method ("auto" with fragmentation, "kvaerno5", "linearly_implicit_euler").
+    Returns the estimate [bytes]."""
     from .binned.grid import GRID_BYTES_PER_BIN, _gib, memory_limit_bytes
     from .binned.scheme import check_memory as _check
 
@@ -643,6 +861,8 @@ def check_memory(cfg: RunConfig):
     if nb * GRID_BYTES_PER_BIN > memory_limit_bytes():
         raise JaxcoagInputError(f"{nb:.4g} bins would need {_gib(nb * GRID_BYTES_PER_BIN)} for the grid alone, more "
                                 f"than the limit of {_gib(memory_limit_bytes())}; {fix}.")
+    if cfg.engine != "binned":
+        return nb * GRID_BYTES_PER_BIN
     implicit = so["method"] in ("kvaerno5", "linearly_implicit_euler") or (so["method"] == "auto" and
                                                                          cfg.has_fragmentation)
     return _check(so["scheme"], nb, order=so["order"], fragmentation=cfg.has_fragmentation, implicit=implicit,
@@ -652,10 +872,12 @@ def check_memory(cfg: RunConfig):
 def build(cfg: RunConfig) -> Built:
     """Build and check every object of a run (no files are touched).
 
-    Raises JaxcoagInputError for anything the physics constructors refuse (e.g. drift effects in
-    a molecular-cloud core, a kernel that cannot be evaluated, a non-finite initial state).
+    Raises JaxcoagInputError for anything the physics constructors or the engine refuse (e.g.
+    drift effects in a molecular-cloud core, a kernel that cannot be evaluated, a non-finite initial
+    state, an outcome the engine cannot run), naming the section to change.
     """
-    from .binned.solve import make_scheme
+    import jax
+    import jax.numpy as jnp
 
     check_memory(cfg)
     scene = make_scene(cfg)
@@ -671,19 +893,35 @@ def build(cfg: RunConfig) -> Built:
         kernel = scene.kernel(gas, rho_s=cfg["dust"]["rho_s"])
         grid = make_grid(cfg)
         n0 = initial_number(cfg, grid, gas.rho_g)
-        frag = make_fragmentation(cfg["fragmentation"])
-        scheme = make_scheme(cfg["solver"]["scheme"], cfg["solver"]["order"])
     except JaxcoagInputError:
         raise
     except (ValueError, TypeError) as e:
         raise JaxcoagInputError(str(e)) from e
-    import jax.numpy as jnp
-
+    try:
+        outcome = make_outcome(cfg["fragmentation"], m0=cfg["dust"]["m0"], engine=cfg.engine)
+    except (ValueError, TypeError) as e:
+        raise JaxcoagInputError(f"[fragmentation] {e}") from e
+    section = "[mc]" if cfg.engine == "mc" else "[solver]"
+    try:
+        engine = make_engine(cfg, grid, rho_d=cfg["dust"]["dust_to_gas"] * float(gas.rho_g))
+        initial = n0 if cfg.engine == "binned" else initial_state(cfg, grid, gas.rho_g)
+    except (ValueError, TypeError) as e:
+        raise JaxcoagInputError(f"{section} {e}") from e
     k = np.asarray(kernel.matrix(jnp.asarray(grid.centers[:: max(1, grid.nbins // 8)])))
     if not np.all(np.isfinite(k)):
         raise JaxcoagInputError("the collision kernel is not finite on the grid for this [gas]/[dust] setting; "
                                 "check the parameters (e.g. z_H, n, T).")
-    ts = output_times_s(cfg)
-    return Built(cfg=cfg, scene=scene, gas=gas, kernel=kernel, grid=grid, n0=n0, fragmentation=frag, ts=ts,
-                 solver=make_solver(cfg), scheme=scheme, order=cfg["solver"]["order"],
-                 rtol=cfg["solver"]["rtol"], atol=cfg["solver"]["atol"], max_steps=cfg["solver"]["max_steps"])
+    t_out = output_times_s(cfg)
+    key = jax.random.key(cfg["mc"]["seed"]) if cfg.engine == "mc" else None
+    if outcome is not None:
+        try:
+            outcome.check(kernel, cfg.engine)
+        except (ValueError, TypeError) as e:
+            raise JaxcoagInputError(f"[fragmentation] model = {cfg['fragmentation']['model']!r} with [run] engine = "
+                                    f"{cfg.engine!r}: {e}") from None
+    try:  # every refusal of the engine itself (Python time, before any work)
+        engine._check(kernel, initial, jnp.asarray(t_out), 0.0, outcome, key)
+    except (ValueError, TypeError) as e:
+        raise JaxcoagInputError(f"{section} {e}") from None
+    return Built(cfg=cfg, scene=scene, gas=gas, kernel=kernel, grid=grid, n0=n0, outcome=outcome, t_out=t_out,
+                 engine=engine, initial=initial, key=key)

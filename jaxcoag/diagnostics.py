@@ -1,8 +1,10 @@
 """Diagnostics on binned mass distributions: moments, errors vs a reference, peak, m^2 f(m).
 
 All functions accept numpy or JAX arrays (mass per bin rho_b [g cm^-3] on a grid with edges
-[g]) and broadcast over leading axes (e.g. output times), so they work on
-``BinnedSolution.mass_per_bin`` directly and inside jit/grad.
+[g]) and broadcast over leading axes (e.g. output times), so they work on any result's
+``mass_per_bin(edges)`` with ``bin_edges(edges)`` (binned and Monte Carlo alike; the results'
+``m2f`` and ``mass_peak`` methods call them), on a dataset's ``mass_per_bin`` with ``m_edge``, and
+inside jit/grad.
 
 References: error metrics and noise floor in docs/design_notes.md (Monte Carlo conventions);
 Ormel (2008) thesis §5.3 (m^2 f(m) plots); Birnstiel et al. (2010) (mass peak).

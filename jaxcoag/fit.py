@@ -50,7 +50,9 @@ import optimistix as optx
 from . import constants as C
 from . import scenes
 from ._validate import JaxcoagInputError, require_x64
-from .binned import MassGrid, Shattering, solve_binned
+from ._engine import evolve
+from .binned import MassGrid
+from .binned.engine import Binned
 from .physics.gas import ch4_disk, midplane_state
 
 __all__ = ["NebulaBox", "nebula_box", "synthetic_target", "residuals", "fit_adam", "fit_least_squares",
@@ -65,17 +67,18 @@ class NebulaBox(eqx.Module):
 
     Attributes:
         grid: MassGrid (static).
-        ts: solve times [s], ts[0] = 0 is the monodisperse start; the rest are observed.
+        t_out: output times [s]; t_out[0] = 0 is the monodisperse start (t0), the rest are observed.
         T: gas temperature [K]; Omega: Keplerian frequency [s^-1]; R: radius [cm].
         rho_s: material density [g cm^-3]; dust_to_gas: dust/gas mass ratio [-].
         alpha, rho_g [g cm^-3], v_frag [cm s^-1]: default values of the parameters (used
             for any parameter not being fitted).
-        fragmentation: include ``Shattering(v_frag)`` (static; stiff, solved with Kvaerno5).
+        fragmentation: include the outcome ``jaxcoag.outcomes.Shattering(v_frag)`` (static; stiff,
+            solved with Kvaerno5).
         rtol, atol: solver tolerances (static).
     """
 
     grid: MassGrid = eqx.field(static=True)
-    ts: jax.Array
+    t_out: jax.Array
     T: jax.Array
     Omega: jax.Array
     R: jax.Array
@@ -93,23 +96,31 @@ class NebulaBox(eqx.Module):
         p.update(params)
         return p
 
-    def solve(self, params=None, *, adjoint=None, ts=None):
-        """BinnedSolution for parameter values ``params`` (dict, linear values; defaults otherwise)."""
+    def solve(self, params=None, *, adjoint=None, t_out=None):
+        """:class:`jaxcoag.BinnedResult` for parameter values ``params`` (dict, linear values; defaults
+        otherwise): ``jaxcoag.evolve`` with ``jaxcoag.Binned(grid)`` from the monodisperse start at
+        ``t0 = t_out[0]`` (default ``self.t_out``), ``throw=False`` (read ``.status``)."""
         p = self._values(params or {})
         gas = midplane_state(p["rho_g"], self.T, p["alpha"], self.Omega, R=self.R)
         kern = scenes.nebula_ch4().kernel(gas, rho_s=self.rho_s)
         rho_d = self.dust_to_gas * p["rho_g"]
         n0 = jnp.zeros(self.grid.nbins).at[0].set(rho_d / self.grid.centers[0])
-        frag = Shattering(p["v_frag"]) if self.fragmentation else None
-        ts = self.ts if ts is None else ts
-        return solve_binned(kern, self.grid, n0, ts, fragmentation=frag, rtol=self.rtol, atol=self.atol,
-                            dt0=1e-6 * ts[-1], adjoint=adjoint or diffrax.ForwardMode(), throw=False)
+        if self.fragmentation:
+            from .outcomes import Shattering
+
+            outcome = Shattering(p["v_frag"])
+        else:
+            outcome = None
+        t_out = self.t_out if t_out is None else jnp.asarray(t_out, jnp.float64)
+        engine = Binned(self.grid, rtol=self.rtol, atol=self.atol, dt0=1e-6 * t_out[-1],
+                        adjoint=adjoint or diffrax.ForwardMode())
+        return evolve(kern, engine, n0, t_out, t0=t_out[0], outcome=outcome, throw=False)
 
     def __call__(self, params=None, *, adjoint=None):
-        """Observed mass fractions rho_b / rho_d, shape (len(ts) - 1, nbins) [-]."""
+        """Observed mass fractions rho_b / rho_d, shape (len(t_out) - 1, nbins) [-]."""
         p = self._values(params or {})
-        sol = self.solve(params, adjoint=adjoint)
-        return sol.mass_per_bin[1:] / (self.dust_to_gas * p["rho_g"])
+        res = self.solve(params, adjoint=adjoint)
+        return res.mass_per_bin()[1:] / (self.dust_to_gas * p["rho_g"])
 
 
 def nebula_box(*, R=3.0 * C.AU, alpha=1e-4, rho_g=None, v_frag=100.0, a0=1e-4, rho_s=3.0, dust_to_gas=0.01,
@@ -123,8 +134,9 @@ def nebula_box(*, R=3.0 * C.AU, alpha=1e-4, rho_g=None, v_frag=100.0, a0=1e-4, r
             midplane value, 2.39e-11 at 3 AU); v_frag: fragmentation velocity [cm s^-1].
         a0: monomer radius [cm]; rho_s: material density [g cm^-3]; dust_to_gas [-].
         bins_per_decade, decades: mass grid from the monomer bin upward (5 x 9 -> 45 bins).
-        ts: observation times [s] (> 0, increasing; the start t = 0 is prepended).
-        fragmentation: include Shattering(v_frag) (then v_frag can be fitted).
+        ts: observation times [s] (> 0, increasing; the start t = 0 is prepended: the model's
+            ``t_out`` = (0, *ts)).
+        fragmentation: include the outcome Shattering(v_frag) (then v_frag can be fitted).
         rtol, atol: solver tolerances (atol relative to the total mass).
     Returns: NebulaBox.
     """
@@ -148,7 +160,7 @@ def nebula_box(*, R=3.0 * C.AU, alpha=1e-4, rho_g=None, v_frag=100.0, a0=1e-4, r
     half = 10 ** (0.5 / bins_per_decade)
     grid = MassGrid.log(m0 / half, m0 / half * 10 ** decades, bins_per_decade)
     f = lambda x: jnp.asarray(x, jnp.float64)
-    return NebulaBox(grid=grid, ts=f(np.concatenate([[0.0], ts])), T=f(gas0.T), Omega=f(gas0.Omega), R=f(R),
+    return NebulaBox(grid=grid, t_out=f(np.concatenate([[0.0], ts])), T=f(gas0.T), Omega=f(gas0.Omega), R=f(R),
                      rho_s=f(rho_s), dust_to_gas=f(dust_to_gas), alpha=f(alpha), rho_g=f(rho_g), v_frag=f(v_frag),
                      fragmentation=bool(fragmentation), rtol=float(rtol), atol=float(atol))
 
@@ -179,7 +191,7 @@ def synthetic_target(model: NebulaBox, truth: dict, *, noise=0.01, key=None):
         model: NebulaBox; truth: dict of true parameter values (alpha [-], rho_g [g cm^-3],
         v_frag [cm s^-1]); noise: relative Gaussian noise per bin (>= 0); key: jax PRNG key
         (default ``jax.random.key(0)``: fixed, reproducible).
-    Returns: array (len(ts) - 1, nbins) of noisy mass fractions [-].
+    Returns: array (len(t_out) - 1, nbins) of noisy mass fractions [-].
     """
     if not isinstance(model, NebulaBox):
         raise JaxcoagInputError("model must be a jaxcoag.fit.NebulaBox (build it with nebula_box()).")
@@ -217,7 +229,7 @@ def _prepare(model, target, init):
         raise JaxcoagInputError("model must be a jaxcoag.fit.NebulaBox (build it with nebula_box()).")
     init = _check_params(init, "init", model)
     target = jnp.asarray(target, jnp.float64)
-    shape = (model.ts.shape[0] - 1, model.grid.nbins)
+    shape = (model.t_out.shape[0] - 1, model.grid.nbins)
     if target.shape != shape:
         raise JaxcoagInputError(f"target must have shape (n_obs, nbins) = {shape}; got {target.shape}.")
     if not bool(jnp.all(jnp.isfinite(target))):

@@ -1,33 +1,34 @@
-"""Solutions to labelled datasets and netCDF files (xarray + h5netcdf / netCDF4).
+"""Results to labelled datasets and netCDF files (xarray + h5netcdf / netCDF4).
 
-``to_xarray(solution)`` turns a :class:`~jaxcoag.binned.BinnedSolution` into an
-``xarray.Dataset`` with coordinates
+Every engine's result has ``.to_xarray()`` (:class:`jaxcoag.BinnedResult`,
+:class:`jaxcoag.MCResult`) with one common layout:
 
-* ``time`` [s] (nt,), with ``t_yr`` [yr] (time) beside it: the same times in Julian years
-  (1 yr = 365.25 d = 3.15576e7 s, ``jaxcoag.constants.yr``),
-* ``mass`` [g] (nbins,) - geometric bin centers, and ``mass_edge`` [g] (nbins+1,) - edges,
-* where the physical state is known (``to_xarray(..., kernel=K)`` with a physical kernel such as
-  ``scene.kernel(gas, rho_s)``; ``jaxcoag run`` passes its kernel): the grain radius ``a`` [cm]
-  (mass) of the bin centers and their Stokes number ``St`` [1] (mass) = tau_f Omega_L in the run's
-  gas state (Ormel 2008 thesis eqs. 2.4, 4.5/4.6; ch. 4 footnote 5). An analytic kernel carries
-  no material density or gas state, so its dataset has neither ``a`` nor ``St`` (they are left
-  out rather than invented),
+* dims ``t`` (output times), ``m`` (mass bins), ``m_edge`` (bin edges);
+* coords ``t`` [s] and ``t_yr`` [yr] on ``t`` (:func:`time_coords`; 1 yr = 365.25 d =
+  3.15576e7 s, ``jaxcoag.constants.yr``), ``m`` [g] (geometric bin centres), ``m_edge`` [g], and
+  where the physical state is known (a physical kernel such as ``scene.kernel(gas, rho_s)``;
+  ``jaxcoag run`` passes its kernel) the grain radius ``a`` [cm] and Stokes number ``St`` [1] of
+  the bin centres on ``m`` (:func:`particle_coords`; Ormel 2008 thesis eqs. 2.4, 4.5/4.6 and ch. 4
+  footnote 5). An analytic kernel carries no material density or gas state, so its dataset has
+  neither ``a`` nor ``St`` (left out rather than invented);
+* variables ``mass_per_bin`` [g cm^-3] (t, m), ``number_per_bin`` [cm^-3] (t, m), ``gel_mass``
+  [g cm^-3] (t), ``mass_drift`` [1] (t) and ``status`` (scalar int32 code of the shared
+  :class:`jaxcoag.RESULTS`, attributes ``status_name`` / ``status_message``; :func:`result_table`);
+* global attributes ``title``, ``Conventions`` (CF-1.10), ``engine`` ("binned" / "mc"),
+  ``status`` (the RESULTS name) and the caller's ``attrs``.
 
-and data variables ``mass_per_bin`` [g cm^-3] (time, mass), ``number_per_bin`` [cm^-3]
-(time, mass), ``gel_mass`` [g cm^-3] (time), ``mass_drift`` [-] (time), ``result_code`` (int,
-a :class:`~jaxcoag.binned.RESULTS` index) with attributes ``result_name``/``result_message``, and
-the solver step counts. Every variable carries ``units`` and ``long_name`` attributes (CF style).
-Caller-supplied ``attrs`` (scene name, alpha, rho_g, ...) are stored as global attributes;
-netCDF attributes must be str / numbers / 1-D numeric arrays, so anything else is stored as
-its ``repr``.
+Engines add their own variables beside these (binned: solver step counts; MC: per-species arrays
+on (t, species)). Every variable carries ``units`` and ``long_name`` attributes (CF style).
+netCDF attributes must be str / numbers / 1-D numeric arrays, so anything else is stored as its
+``repr``.
 
-``save_netcdf`` writes atomically: the dataset goes to a temporary file in the target's
-directory, is flushed and fsync'ed, then ``os.replace``'d onto the target. A failure at any
-point leaves no partial file at the target (a previous file there stays intact) and removes
-the temporary file.
+``save_netcdf`` takes a dataset or any result and writes atomically (:func:`atomic_write`): the
+dataset goes to a temporary file in the target's directory, is flushed and fsync'ed, then
+``os.replace``'d onto the target. A failure at any point leaves no partial file at the target (a
+previous file there stays intact) and removes the temporary file.
 
-References: CF conventions 1.10 (units, long_name); xarray ``Dataset.to_netcdf``;
-docs/design_notes.md, house style (results -> io -> plot).
+References: CF conventions 1.10 (units, long_name); xarray ``Dataset.to_netcdf``; Ormel (2008)
+thesis eqs. 2.4, 4.5, 4.6 (grain radius, friction time).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ import numpy as np
 
 from ._validate import JaxcoagInputError
 
-__all__ = ["to_xarray", "save_netcdf", "load_netcdf", "result_table", "time_coords", "particle_coords"]
+__all__ = ["save_netcdf", "load_netcdf", "result_table", "time_coords", "particle_coords", "atomic_write"]
 
 
 def _xr():
@@ -51,10 +52,11 @@ def _xr():
 
 
 def result_table():
-    """Mapping RESULTS index (int) -> (name, message) for :class:`jaxcoag.binned.RESULTS`."""
-    from .binned import RESULT_NAMES, RESULTS
+    """Mapping RESULTS code (int, the position in :data:`jaxcoag.RESULT_NAMES`) -> (name, message)
+    of the shared status enumeration :class:`jaxcoag.RESULTS` (both engines, files, sweeps)."""
+    from . import _status
 
-    return {code: (name, RESULTS[getattr(RESULTS, name)]) for code, name in enumerate(RESULT_NAMES)}
+    return dict(enumerate(_status.result_table()))
 
 
 def _attr_value(v):
@@ -75,23 +77,24 @@ def _attr_value(v):
 
 
 def time_coords(t_s):
-    """CF-labelled time coordinates of output times ``t_s`` [s]: ``{"time": ... [s], "t_yr": ... [yr]}``
-    on the dimension ``time`` (t_yr = t / ``jaxcoag.constants.yr``, the Julian year 3.15576e7 s)."""
+    """CF-labelled time coordinates of output times ``t_s`` [s]: ``{"t": ... [s], "t_yr": ... [yr]}``
+    on the dimension ``t`` (t_yr = t / ``jaxcoag.constants.yr``, the Julian year 3.15576e7 s)."""
     from . import constants as C
 
     t = np.asarray(t_s, np.float64)
-    return {"time": ("time", t, {"units": "s", "long_name": "time"}),
-            "t_yr": ("time", t / C.yr, {"units": "yr", "long_name": "time in years",
-                                         "comment": f"Julian years: 1 yr = 365.25 d = {C.yr:.8g} s"})}
+    return {"t": ("t", t, {"units": "s", "long_name": "time"}),
+            "t_yr": ("t", t / C.yr, {"units": "yr", "long_name": "time in years",
+                                     "comment": f"Julian years: 1 yr = 365.25 d = {C.yr:.8g} s"})}
 
 
-def particle_coords(kernel, m, dim="mass"):
+def particle_coords(kernel, m, dim="m"):
     """Grain radius ``a`` [cm] and Stokes number ``St`` [1] of masses ``m`` [g] as coordinates on
     ``dim``, from a physical kernel's ``particles(m)`` (its material density, drag law and gas
     state: a = (3 m / (4 pi rho_s))^(1/3) for compact grains, St = tau_f / t_L with the Epstein /
     Stokes friction time, Ormel 2008 thesis eqs. 2.4, 4.5, 4.6 and ch. 4 footnote 5).
-    Returns {} for kernels without ``particles`` (analytic kernels: no rho_s, no gas state)."""
-    if kernel is None or not hasattr(kernel, "particles"):
+    Returns {} for kernels without ``particles`` (analytic kernels: no rho_s, no gas state) and for
+    kernels of porous grains (``n_struct > 0``: a bin-centre mass alone does not fix the size)."""
+    if kernel is None or not hasattr(kernel, "particles") or int(getattr(kernel, "n_struct", 0) or 0) > 0:
         return {}
     import jax.numpy as jnp
 
@@ -102,81 +105,6 @@ def particle_coords(kernel, m, dim="mass"):
                    {"units": "1", "long_name": "Stokes number tau_f / t_L of the bin-center mass in the run's gas"})}
 
 
-def to_xarray(solution, *, attrs=None, kernel=None):
-    """Labelled dataset of a binned solution.
-
-    Arguments:
-        solution: a :class:`jaxcoag.binned.BinnedSolution` (not vmapped: ``mass_per_bin`` of
-            shape (nt, nbins); index a batched solution first, or use :func:`jaxcoag.sweep.sweep`).
-        attrs: optional dict of global attributes (scene name, parameters such as
-            ``alpha``, ``rho_g`` [g cm^-3], ``T`` [K], ``rho_s`` [g cm^-3], ...). Keys must be
-            strings; values that netCDF cannot hold are stored as their ``repr``.
-        kernel: optional physical kernel (``scene.kernel(gas, rho_s)``, compact grains) that
-            the solution was computed with; adds the coordinates ``a`` [cm] and ``St`` [1] on
-            ``mass``. Kernels without ``particles`` (analytic kernels) add nothing.
-
-    Returns:
-        xarray.Dataset with coords ``time`` [s], ``t_yr`` [yr] (time), ``mass`` [g],
-        ``mass_edge`` [g], and with a physical kernel ``a`` [cm] and ``St`` [1] (mass);
-        variables ``mass_per_bin`` [g cm^-3], ``number_per_bin`` [cm^-3], ``gel_mass``
-        [g cm^-3], ``mass_drift`` [-], ``result_code`` [-], ``steps``, ``rejected_steps``.
-
-    References: CF conventions (units / long_name attributes).
-    """
-    xr = _xr()
-    from .binned import BinnedSolution
-
-    if not isinstance(solution, BinnedSolution):
-        raise JaxcoagInputError(f"to_xarray needs a jaxcoag.binned.BinnedSolution, got {type(solution).__name__}.")
-    rho = np.asarray(solution.mass_per_bin, dtype=np.float64)
-    if rho.ndim != 2:
-        raise JaxcoagInputError(
-            f"to_xarray takes one solution with mass_per_bin of shape (nt, nbins); got shape {rho.shape} "
-            "(a vmapped batch?). Index one member first, or build the dataset with jaxcoag.sweep.sweep.")
-    if attrs is not None and not isinstance(attrs, dict):
-        raise JaxcoagInputError("attrs must be a dict of str -> value (scene name, parameters).")
-    grid = solution.grid
-    from .binned import result_code
-
-    code = int(np.asarray(result_code(solution.result)))
-    name, message = result_table()[code]
-    stats = solution.stats
-    ds = xr.Dataset(
-        data_vars={
-            "mass_per_bin": (("time", "mass"), rho,
-                             {"units": "g cm-3", "long_name": "dust mass density per mass bin"}),
-            "number_per_bin": (("time", "mass"), np.asarray(solution.number_per_bin, np.float64),
-                               {"units": "cm-3", "long_name": "dust number density per mass bin"}),
-            "gel_mass": (("time",), np.asarray(solution.gel_mass, np.float64),
-                         {"units": "g cm-3", "long_name": "mass density that left through the top of the grid"}),
-            "mass_drift": (("time",), np.asarray(solution.mass_drift, np.float64),
-                           {"units": "1", "long_name": "relative total-mass change (M(t) - M(t0)) / M(t0) incl. gel"}),
-            "result_code": ((), np.int32(code),
-                            {"units": "1", "long_name": "jaxcoag.binned.RESULTS index (0 = successful)",
-                             "result_name": name, "result_message": message}),
-            "steps": ((), np.int64(np.asarray(stats["steps"])), {"units": "1", "long_name": "accepted solver steps"}),
-            "rejected_steps": ((), np.int64(np.asarray(stats["rejected"])),
-                               {"units": "1", "long_name": "rejected solver steps"}),
-        },
-        coords={
-            **time_coords(solution.ts),
-            "mass": ("mass", np.asarray(grid.centers, np.float64),
-                     {"units": "g", "long_name": "geometric bin-center mass sqrt(m_lo m_hi)"}),
-            "mass_edge": ("mass_edge", np.asarray(grid.edges, np.float64),
-                          {"units": "g", "long_name": "mass-bin edges"}),
-            **particle_coords(kernel, grid.centers),
-        },
-    )
-    ds.attrs["title"] = "jaxcoag binned coagulation solution"
-    ds.attrs["Conventions"] = "CF-1.10"
-    ds.attrs["result"] = name
-    for k, v in (attrs or {}).items():
-        if not isinstance(k, str):
-            raise JaxcoagInputError(f"attrs keys must be strings (got {k!r}).")
-        ds.attrs[k] = _attr_value(v)
-    return ds
-
-
 def _pick_engine():
     for eng, mod in (("h5netcdf", "h5netcdf"), ("netcdf4", "netCDF4"), ("scipy", "scipy")):
         try:
@@ -185,7 +113,6 @@ def _pick_engine():
         except ImportError:  # pragma: no cover - depends on the environment
             continue
     raise ImportError("saving netCDF needs h5netcdf, netCDF4 or scipy.")  # pragma: no cover
-
 
 
 def atomic_write(path, write, *, what="output file"):
@@ -225,15 +152,16 @@ def atomic_write(path, write, *, what="output file"):
     return path
 
 
-def save_netcdf(ds_or_solution, path, *, attrs=None, engine=None, kernel=None):
-    """Write a dataset (or a BinnedSolution, via :func:`to_xarray`) to netCDF atomically.
+def save_netcdf(result_or_dataset, path, *, attrs=None, kernel=None, edges=None, engine=None):
+    """Write a dataset, or any result with ``.to_xarray`` (BinnedResult, MCResult), to netCDF atomically.
 
     Arguments:
-        ds_or_solution: xarray.Dataset or BinnedSolution.
+        result_or_dataset: xarray.Dataset, or a result: it is converted with
+            ``result.to_xarray(attrs=attrs, kernel=kernel, edges=edges)``.
         path: target file path (str or PathLike); its directory must exist.
-        attrs: global attributes, only used when a solution is given.
-        kernel: the solution's physical kernel (adds ``a`` [cm] and ``St``; see :func:`to_xarray`),
-            only used when a solution is given.
+        attrs: global attributes; kernel: the run's physical kernel (adds ``a`` [cm] and ``St``
+            on ``m``); edges: mass-bin edges [g] of the binned view (default: the binned grid /
+            automatic MC edges) - these three only for a result (set them on a Dataset yourself).
         engine: xarray netCDF engine; default h5netcdf (then netcdf4, scipy).
 
     Returns:
@@ -244,15 +172,18 @@ def save_netcdf(ds_or_solution, path, *, attrs=None, engine=None, kernel=None):
     exception the temporary file is removed and an existing target is left untouched.
     """
     xr = _xr()
-    if isinstance(ds_or_solution, xr.Dataset):
-        if attrs is not None:
-            raise JaxcoagInputError("attrs is only used when saving a solution; set ds.attrs on a Dataset instead.")
-        if kernel is not None:
-            raise JaxcoagInputError("kernel is only used when saving a solution; build the Dataset with "
-                                    "to_xarray(solution, kernel=K) instead.")
-        ds = ds_or_solution
+    if isinstance(result_or_dataset, xr.Dataset):
+        given = [k for k, v in (("attrs", attrs), ("kernel", kernel), ("edges", edges)) if v is not None]
+        if given:
+            raise JaxcoagInputError(f"save_netcdf({', '.join(k + '=...' for k in given)}) is only for saving a result; "
+                                    "on a Dataset set ds.attrs yourself, or build it with "
+                                    "result.to_xarray(attrs=..., kernel=..., edges=...).")
+        ds = result_or_dataset
+    elif callable(getattr(result_or_dataset, "to_xarray", None)):
+        ds = result_or_dataset.to_xarray(attrs=attrs, kernel=kernel, edges=edges)
     else:
-        ds = to_xarray(ds_or_solution, attrs=attrs, kernel=kernel)
+        raise JaxcoagInputError(f"save_netcdf needs an xarray.Dataset or a result with .to_xarray() (the return value of "
+                                f"jaxcoag.evolve); got {type(result_or_dataset).__name__}.")
     path = os.fspath(path)
     if os.path.isdir(path):
         raise JaxcoagInputError(f"{path!r} is a directory; give a file path such as {os.path.join(path, 'run.nc')!r}.")

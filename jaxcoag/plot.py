@@ -1,6 +1,10 @@
-"""Standard diagnostic panel of a binned solution (after DustPy's ``dustpy.plot.panel``).
+"""Standard diagnostic panel of a run of any engine (after DustPy's ``dustpy.plot.panel``).
 
-``panel(solution, kernel=None, path=None)`` draws four axes:
+``panel(result_or_dataset, kernel=None, path=None)`` takes a result of ``jaxcoag.evolve``
+(:class:`jaxcoag.BinnedResult`, :class:`jaxcoag.MCResult`; converted with ``.to_xarray(kernel=...)``)
+or a dataset of the common layout (``jaxcoag run`` / :func:`jaxcoag.io.load_netcdf`: ``mass_per_bin``
+on dims (``t``, ``m``), coords ``t`` [s], ``m`` [g], ``m_edge`` [g] and optionally ``St``), so binned
+and Monte Carlo runs are drawn alike. Four axes:
 
 (a) m^2 f(m) = d rho / d ln m [g cm^-3] against m [g] at every output time, coloured by time
     with a colour bar in years (log scale when the positive output times span more than a
@@ -9,12 +13,13 @@
     scene's drag law, :func:`jaxcoag.runner.frag_limited_size`);
 (b) mass-peak history m_p(t) [g] (``diagnostics.mass_peak``) against t [yr] (t [s] for runs
     shorter than 0.01 yr, e.g. dimensionless analytic-kernel tests);
-(c) Stokes number St(m) = tau_f / t_L of the bin centers (needs a physical kernel with
-    ``particles(m)``, e.g. ``scenes.nebula_ch4().kernel(gas, rho_s)``);
+(c) Stokes number St(m) = tau_f / t_L of the bin centers (from a physical kernel's
+    ``particles(m)``, e.g. ``scenes.nebula_ch4().kernel(gas, rho_s)``, or else from the dataset's
+    ``St`` coordinate);
 (d) relative-velocity map Delta v(m1, m2) [cm s^-1] on the bin centers (needs a kernel with
     ``relative_velocity2``).
 
-Without a kernel, (c) and (d) say so instead of plotting. The figure is a plain
+Without that information, (c) and (d) say so instead of plotting. The figure is a plain
 ``matplotlib.figure.Figure`` (no pyplot state, no global backend change), so it works headless
 and in notebooks; with ``path`` it is saved as PNG.
 
@@ -70,13 +75,41 @@ def _m2f_axes(ax, y, ylabel, title):
     ax.set_title(title)
 
 
-def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=None):
-    """Four-panel overview of a :class:`~jaxcoag.binned.BinnedSolution`.
+def _dataset(result_or_dataset, kernel):
+    """The common-layout dataset of a result (``.to_xarray(kernel=...)``) or a dataset, checked."""
+    import xarray as xr
+
+    ds = result_or_dataset
+    if not isinstance(ds, xr.Dataset):
+        if not callable(getattr(ds, "to_xarray", None)):
+            raise JaxcoagInputError(f"panel needs a result of jaxcoag.evolve (BinnedResult, MCResult) or its dataset "
+                                    f"(result.to_xarray(), jaxcoag.io.load_netcdf); got {type(ds).__name__}.")
+        if np.ndim(ds.t) != 1:
+            raise JaxcoagInputError(f"panel draws one run (t of shape (T,)); got t of shape {np.shape(ds.t)} (a vmapped "
+                                    "batch?). Index one member first.")
+        ds = ds.to_xarray(kernel=kernel)
+    need = ("mass_per_bin", "t", "m", "m_edge")
+    miss = [k for k in need if k not in ds.variables]
+    if miss:
+        raise JaxcoagInputError(f"panel needs a dataset of the jaxcoag result layout (missing {miss}); write it with "
+                                "result.to_xarray() or `jaxcoag run`.")
+    if ds["mass_per_bin"].dims != ("t", "m"):
+        raise JaxcoagInputError(f"panel draws one run (mass_per_bin on dims ('t', 'm')); got dims "
+                                f"{ds['mass_per_bin'].dims} (a sweep? select one member first, e.g. ds.isel(alpha=0), "
+                                "or draw it with sweep_panel).")
+    return ds
+
+
+def panel(result_or_dataset, kernel=None, path=None, *, dpi=110, title=None, frag_limit=None):
+    """Four-panel overview of one run of any engine.
 
     Arguments:
-        solution: BinnedSolution (one solve, mass_per_bin (nt, nbins) [g cm^-3]).
+        result_or_dataset: a result of ``jaxcoag.evolve`` (one run; converted with
+            ``.to_xarray(kernel=kernel)``, Monte Carlo results on their automatic bins) or a dataset
+            of the common layout (``mass_per_bin`` (t, m) [g cm^-3], ``m_edge`` [g], ``t`` [s]).
         kernel: optional physical kernel (``SceneKernel``) for the Stokes-number and
             relative-velocity panels; analytic kernels with ``relative_velocity2`` draw (d) only.
+            Without a kernel, (c) uses the dataset's ``St`` coordinate when it has one.
         path: optional PNG path; the directory must exist.
         dpi: resolution of the saved PNG; title: figure title.
         frag_limit: optional (m_frag [g], a_frag [cm], St_frag) of the fragmentation barrier
@@ -86,30 +119,26 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=N
 
     Returns:
         matplotlib.figure.Figure with axes [m2f, peak, stokes, dv, then colour bars: time (of
-        axis 0) and, with a kernel, Delta v]; the first ``nt`` lines of axis 0 are the m^2 f
-        curves in time order (ydata = ``diagnostics.m2f(solution.mass_per_bin, grid)[i]``), the
-        fragmentation line (gid ``"frag_limit"``) comes after them.
+        axis 0) and, with a kernel, Delta v]; the first ``T`` lines of axis 0 are the m^2 f
+        curves in time order (xdata = ``ds.m``, ydata = ``diagnostics.m2f(ds.mass_per_bin[i],
+        ds.m_edge)``), the fragmentation line (gid ``"frag_limit"``) comes after them.
     """
     from matplotlib.figure import Figure
     from matplotlib import cm, colors
     from matplotlib.cm import ScalarMappable
-    from .binned import BinnedSolution
 
-    if not isinstance(solution, BinnedSolution):
-        raise JaxcoagInputError(f"panel needs a jaxcoag.binned.BinnedSolution, got {type(solution).__name__}.")
-    rho = np.asarray(solution.mass_per_bin, np.float64)
-    if rho.ndim != 2:
-        raise JaxcoagInputError(f"panel draws one solution (mass_per_bin of shape (nt, nbins)); got {rho.shape}.")
     if path is not None:
         d = os.path.dirname(os.path.abspath(os.fspath(path)))
         if not os.path.isdir(d):
             raise JaxcoagInputError(f"directory {d!r} for the PNG does not exist.")
-    grid = solution.grid
-    m = np.asarray(grid.centers)
-    t = np.asarray(solution.ts, np.float64)
+    ds = _dataset(result_or_dataset, kernel)
+    rho = np.asarray(ds["mass_per_bin"].values, np.float64)
+    edges = np.asarray(ds["m_edge"].values, np.float64)
+    m = np.asarray(ds["m"].values, np.float64)
+    t = np.asarray(ds["t"].values, np.float64)
     # per time row: diagnostics.m2f / mass_peak broadcast 1-D edges against (nt, nbins), which
     # jax_numpy_rank_promotion='raise' rejects
-    y = np.stack([np.asarray(diagnostics.m2f(r, grid)) for r in rho])
+    y = np.stack([np.asarray(diagnostics.m2f(r, edges)) for r in rho])
 
     fig = Figure(figsize=(11, 8.5), layout="constrained")
     ax = fig.subplots(2, 2).ravel()
@@ -144,7 +173,7 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=N
         ax_f.legend(fontsize=7)
 
     # (b) mass-peak history
-    mp = np.array([float(diagnostics.mass_peak(r, grid)) for r in rho])
+    mp = np.array([float(diagnostics.mass_peak(r, edges)) for r in rho])
     ax_p.plot(tv, mp, "o-", color="C3")
     ax_p.set_yscale("log")
     if np.all(tv > 0) or (len(tv) > 2 and tv[1] > 0 and tv[0] == 0 and tv[-1] / tv[1] > 30):
@@ -162,8 +191,12 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=N
     ax_p.set_title("(b) mass-peak history")
 
     # (c) Stokes number
-    if kernel is not None and hasattr(kernel, "particles"):
+    st = None
+    if kernel is not None and hasattr(kernel, "particles") and int(getattr(kernel, "n_struct", 0) or 0) == 0:
         st = np.asarray(kernel.particles(m).st)
+    elif "St" in ds.coords and ds["St"].dims == ("m",):
+        st = np.asarray(ds["St"].values, np.float64)
+    if st is not None:
         ax_s.loglog(m, st, color="C0")
         ax_s.axhline(1.0, color="0.6", ls=":")
         if frag_limit is not None:
@@ -180,8 +213,7 @@ def panel(solution, kernel=None, path=None, *, dpi=110, title=None, frag_limit=N
     # (d) relative velocity map
     if kernel is not None and hasattr(kernel, "relative_velocity2"):
         dv = np.sqrt(np.maximum(np.asarray(kernel.relative_velocity2(m[:, None], m[None, :])), 0.0))
-        e = np.asarray(grid.edges)
-        pc = ax_v.pcolormesh(e, e, dv.T, norm=colors.LogNorm(vmin=max(dv[dv > 0].min(), dv.max() * 1e-10)
+        pc = ax_v.pcolormesh(edges, edges, dv.T, norm=colors.LogNorm(vmin=max(dv[dv > 0].min(), dv.max() * 1e-10)
                                                              if np.any(dv > 0) else 1e-10, vmax=max(dv.max(), 1e-10)),
                              cmap="magma", shading="flat")
         ax_v.set_xscale("log")
@@ -206,7 +238,8 @@ def sweep_panel(ds, path=None, *, dpi=110, title=None):
     Axes:
         (a) the mass peak at the last output time [g] (``mass_peak``) against the first swept
             parameter, one line per combination of the others (log axes where the values are
-            positive and span a decade or more); failed members (status != 0) are marked x;
+            positive and span a decade or more); failed members (status one of
+            :data:`jaxcoag.FAILURES`) are marked x;
         (b) the final m^2 f(m) = d rho / d ln m [g cm^-3] of every member against m [g],
             coloured by the first swept parameter with a colour bar (LogNorm over a span of a
             decade or more, else Normalize), line style cycling over the other parameters;
@@ -214,7 +247,7 @@ def sweep_panel(ds, path=None, *, dpi=110, title=None):
 
     Arguments:
         ds: the sweep dataset (coords = swept parameters in ``attrs["swept"]`` order, then
-            ``time``, ``mass``, ``mass_edge``; variables ``mass_per_bin``, ``mass_peak``, ``status``).
+            ``t``, ``m``, ``m_edge``; variables ``mass_per_bin`` (..., t, m), ``mass_peak``, ``status``).
         path: optional PNG path (its directory must exist); dpi: PNG resolution; title: suptitle.
 
     Returns:
@@ -227,7 +260,7 @@ def sweep_panel(ds, path=None, *, dpi=110, title=None):
     from matplotlib.cm import ScalarMappable
 
     swept = [k for k in str(ds.attrs.get("swept", "")).split(",") if k]
-    need = ("mass_per_bin", "mass_peak", "status", "mass_edge")
+    need = ("mass_per_bin", "mass_peak", "status", "m_edge")
     if not swept or any(k not in ds.variables for k in need + tuple(swept)):
         raise JaxcoagInputError("sweep_panel needs a dataset written by jaxcoag.runner.sweep_config / `jaxcoag sweep` "
                                 f"(swept parameters in attrs['swept'] and variables {list(need)}).")
@@ -238,10 +271,13 @@ def sweep_panel(ds, path=None, *, dpi=110, title=None):
     p0, rest = swept[0], swept[1:]
     x = np.asarray(ds[p0].values, np.float64)
     mp = np.asarray(ds["mass_peak"].transpose(*swept).values, np.float64).reshape(x.size, -1)
+    from ._status import FAILURES, RESULT_NAMES
+
     st = np.asarray(ds["status"].transpose(*swept).values).reshape(x.size, -1)
-    rho = np.asarray(ds["mass_per_bin"].isel(time=-1).transpose(*swept, "mass").values, np.float64)
+    failed = np.isin(st, [RESULT_NAMES.index(n) for n in FAILURES])
+    rho = np.asarray(ds["mass_per_bin"].isel(t=-1).transpose(*swept, "m").values, np.float64)
     rho = rho.reshape(x.size, -1, rho.shape[-1])
-    e = np.asarray(ds["mass_edge"].values, np.float64)
+    e = np.asarray(ds["m_edge"].values, np.float64)
     m = np.sqrt(e[:-1] * e[1:])
     y = rho / np.diff(np.log(e))
     combos = [dict(zip(rest, v)) for v in np.array(np.meshgrid(*[ds[k].values for k in rest],
@@ -257,7 +293,7 @@ def sweep_panel(ds, path=None, *, dpi=110, title=None):
     for j, c in enumerate(combos):
         lab = ", ".join(f"{k} = {v:.3g}" for k, v in c.items()) or None
         line, = ax_m.plot(x, mp[:, j], "o-", label=lab if j < 10 else None)
-        bad = st[:, j] != 0
+        bad = failed[:, j]
         if np.any(bad):
             ax_m.plot(x[bad], np.where(np.isfinite(mp[bad, j]), mp[bad, j], np.nanmin(mp)), "x", color="k", ms=9,
                       label="failed" if j == 0 else None)
@@ -268,7 +304,7 @@ def sweep_panel(ds, path=None, *, dpi=110, title=None):
     ax_m.set_xlabel(p0)
     ax_m.set_ylabel(r"mass peak $m_p$ at $t_{\rm end}$ [g]")
     ax_m.set_title(f"(a) mass peak vs {p0}")
-    if rest or np.any(st != 0):
+    if rest or np.any(failed):
         ax_m.legend(fontsize=7)
 
     norm = colors.LogNorm(vmin=x.min(), vmax=x.max()) if _log_ok(x) else \

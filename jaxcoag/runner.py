@@ -1,16 +1,18 @@
-"""Run a configuration (:mod:`jaxcoag.config`) with the binned engine: the ``jaxcoag run`` job.
+"""Run a configuration (:mod:`jaxcoag.config`) with its engine: the ``jaxcoag run`` job.
 
-:func:`run` validates and builds everything first (a refused run writes no file), then
-integrates segment by segment over the output times with checkpoints
-(:func:`jaxcoag.checkpoint.integrate`), saves a netCDF file (:func:`jaxcoag.io.save_netcdf`,
-atomic; global attributes record the configuration as TOML text, its hash, the scene and the
-gas state) and the standard figure panel (:func:`jaxcoag.plot.panel`) next to it, and prints a
-summary table (time, mass peak, peak radius, Stokes numbers, mass drift, solver steps).
+:func:`run` validates and builds everything first (a refused run writes no file), then calls
+``jaxcoag.evolve(kernel, engine, initial, t_out, outcome=..., key=..., checkpoint=...)`` with the
+engine of ``[run] engine`` (:class:`jaxcoag.Binned` or :class:`jaxcoag.MonteCarlo`), segment by
+segment over the output times with checkpoints (:func:`jaxcoag.checkpoint.run_segments`), saves a
+netCDF file of the common layout (``result.to_xarray(kernel=..., edges=<[grid] edges>)``: dims
+``t``, ``m``, ``m_edge``, the same for every engine; atomic; global attributes record the
+configuration as TOML text, its hash, the scene and the gas state) and the standard figure panel
+(:func:`jaxcoag.plot.panel`) next to it, and prints a summary table (time, mass peak, peak radius,
+Stokes numbers, mass drift).
 
-:func:`quick_config` shrinks a configuration for smoke tests (coarser grid, fewer outputs,
-looser tolerances); :func:`solution_from_dataset` turns a saved file back into a
-:class:`~jaxcoag.binned.BinnedSolution` (``jaxcoag plot``); :func:`sweep_config` runs a
-parameter sweep of a configuration (``jaxcoag sweep``).
+:func:`quick_config` shrinks a configuration for smoke tests; :func:`kernel_from_dataset` rebuilds
+a saved run's kernel (``jaxcoag plot``); :func:`sweep_config` runs a parameter sweep of a
+configuration (``jaxcoag sweep``).
 
 References: Stammler & Birnstiel (2022, DustPy) (run / snapshot / panel workflow);
 Birnstiel et al. (2012) fragmentation barrier St_frag = v_frag^2 / (3 alpha c_s^2).
@@ -19,6 +21,8 @@ Birnstiel et al. (2012) fragmentation barrier St_frag = v_frag^2 / (3 alpha c_s^
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import time
 
 import numpy as np
@@ -29,19 +33,21 @@ from . import constants as C
 from . import diagnostics
 from ._validate import JaxcoagInputError
 
-__all__ = ["run", "RunResult", "quick_config", "solution_from_dataset", "kernel_from_dataset", "summary_rows",
-           "format_summary", "sweep_config", "figure_path", "checkpoint_path", "st_frag", "frag_limited_size",
-           "check_writable"]
+__all__ = ["run", "RunResult", "quick_config", "kernel_from_dataset", "summary_rows", "format_summary",
+           "sweep_config", "figure_path", "checkpoint_path", "st_frag", "frag_limited_size", "check_writable"]
 
 
 class RunResult:
     """What :func:`run` returns.
 
-    Attributes: solution (BinnedSolution), built (config.Built), path (netCDF or None),
-    figure (PNG path or None), checkpoint (path or None), finished (bool), wall_s [s],
-    rows (list of per-output dicts, see :func:`summary_rows`), numbers (dict of headline
-    numbers: final mass peak [g], peak radius [cm], St at the peak, max St, |mass drift|,
-    steps, result name, fragmentation-barrier estimate St_frag).
+    Attributes: result (the engine's result: :class:`jaxcoag.BinnedResult` /
+    :class:`jaxcoag.MCResult`), dataset (its common-layout ``xarray.Dataset`` on the [grid] bins,
+    as written), built (config.Built), path (netCDF or None), figure (PNG path or None),
+    checkpoint (path or None), finished (all output times done), failed (a failure status),
+    resumed_from (outputs already in the checkpoint when the run started), wall_s [s], rows (list
+    of per-output dicts, see :func:`summary_rows`), numbers (dict of headline numbers: final mass
+    peak [g], peak radius [cm], St at the peak, max St, |mass drift|, status name, fragmentation-
+    barrier estimate St_frag, and the engine's work: solver steps / Monte Carlo events).
     """
 
     def __init__(self, **kw):
@@ -61,18 +67,22 @@ def checkpoint_path(nc_path: str) -> str:
 
 def quick_config(cfg: cfgmod.RunConfig) -> cfgmod.RunConfig:
     """A smaller, faster version of a config for smoke tests (``--quick``): at most 3 bins per
-    decade (m_min recomputed so the monomer sits at a bin centre), at most 8 outputs and
-    rtol >= 1e-4; the physics and the time span are unchanged."""
+    decade (m_min recomputed so the monomer sits at a bin centre), at most 8 outputs, and rtol >=
+    1e-4 (binned) or [mc] ns_target <= 200 (Ns* / Ng*, Monte Carlo); the physics and the time span
+    are unchanged."""
     raw = cfg.raw()
     g = raw.setdefault("grid", {})
     g["bins_per_decade"] = min(float(cfg["grid"]["bins_per_decade"]), 3.0)
-    if "m_min" in g:
-        del g["m_min"]  # recentre the monomer in the coarser grid
+    g.pop("m_min", None)  # recentre the monomer in the coarser grid
     t = raw.setdefault("time", {})
     if "t_out_yr" not in t:
         t["n_out"] = min(int(cfg["time"]["n_out"]), 8)
-    s = raw.setdefault("solver", {})
-    s["rtol"] = max(float(cfg["solver"]["rtol"]), 1e-4)
+    if cfg.engine == "binned":
+        s = raw.setdefault("solver", {})
+        s["rtol"] = max(float(cfg["solver"]["rtol"]), 1e-4)
+    else:
+        s = raw.setdefault("mc", {})
+        s["ns_target"] = min(int(cfg["mc"]["ns_target"]), 200)
     return cfgmod.from_dict(raw, source=cfg.source + " (quick)")
 
 
@@ -84,13 +94,20 @@ def _attrs(cfg, built):
          "gas_model": cfg["gas"]["model"], "rho_s": cfg["dust"]["rho_s"], "a0_cm": cfg["dust"]["a0"],
          "m0_g": cfg["dust"]["m0"], "dust_to_gas": cfg["dust"]["dust_to_gas"],
          "rho_g": float(g.rho_g), "T": float(g.T), "alpha": float(g.alpha), "c_g": float(g.c_g),
-         "Omega": float(g.Omega), "Sigma_g": float(g.Sigma_g), "R_cm": float(g.R),
-         "scheme": cfg["solver"]["scheme"], "solver_method": cfg["solver"]["method"],
-         "rtol": cfg["solver"]["rtol"], "atol": cfg["solver"]["atol"]}
+         "Omega": float(g.Omega), "Sigma_g": float(g.Sigma_g), "R_cm": float(g.R)}
+    if cfg.engine == "binned":
+        so = cfg["solver"]
+        a.update(scheme=so["scheme"], solver_method=so["method"], rtol=so["rtol"], atol=so["atol"])
+    else:
+        s = cfg["mc"]
+        a.update(mc_grouping=s["grouping"], mc_volume=s["volume"], mc_ns_target=s["ns_target"], mc_seed=s["seed"],
+                 mc_f_eps=s["f_eps"])
     fr = cfg["fragmentation"]
     a["fragmentation"] = "none" if fr is None else fr["model"]
     if fr is not None and fr["v_frag"] is not None:
         a["v_frag"] = fr["v_frag"]
+    if fr is not None and fr["m_frag"] is not None:
+        a["m_frag"] = fr["m_frag"]
     from . import __version__
     a["jaxcoag_version"] = __version__
     return a
@@ -135,23 +152,26 @@ def frag_limited_size(kernel, st_target, *, m_lo=1e-30, m_hi=1e30):
     return m, float(np.asarray(kernel.particles(jnp.asarray(m)).a))
 
 
-def summary_rows(sol, kernel):
-    """Per-output summary: t [yr], mass peak m_p [g], its radius a_p [cm] and St_p, the largest
-    Stokes number among bins holding > 1e-3 of the mass per ln m peak, and the mass drift."""
-    rho = np.asarray(sol.mass_per_bin)
-    grid = sol.grid
-    m = np.asarray(grid.centers)
-    st_all = np.asarray(kernel.particles(jnp.asarray(m)).st)
-    a_all = np.asarray(kernel.particles(jnp.asarray(m)).a)
-    y = rho / np.diff(grid.log_edges)
+def summary_rows(ds, kernel):
+    """Per-output summary of a run dataset (common layout): t [yr], mass peak m_p [g] (of the mass
+    per ln m), its radius a_p [cm] and St_p, the largest Stokes number and radius among bins holding
+    > 1e-3 of the peak mass per ln m, and the mass drift."""
+    rho = np.asarray(ds["mass_per_bin"].values, np.float64)
+    edges = np.asarray(ds["m_edge"].values, np.float64)
+    m = np.asarray(ds["m"].values, np.float64)
+    p_all = kernel.particles(jnp.asarray(m))
+    st_all, a_all = np.asarray(p_all.st), np.asarray(p_all.a)
+    y = rho / np.diff(np.log(edges))
+    t = np.asarray(ds["t"].values, np.float64)
+    drift = np.asarray(ds["mass_drift"].values, np.float64)
     rows = []
     for i in range(rho.shape[0]):
-        mp = float(diagnostics.mass_peak(rho[i], grid))
+        mp = float(diagnostics.mass_peak(rho[i], edges))
         p = kernel.particles(jnp.asarray(mp))
         sig = y[i] > 1e-3 * y[i].max()
-        rows.append(dict(t_yr=float(sol.ts[i]) / C.yr, m_peak=mp, a_peak=float(p.a), st_peak=float(p.st),
-                         st_max=float(st_all[sig].max()), a_max=float(a_all[sig].max()),
-                         mass_drift=float(sol.mass_drift[i])))
+        rows.append(dict(t_yr=float(t[i]) / C.yr, m_peak=mp, a_peak=float(p.a), st_peak=float(p.st),
+                         st_max=float(st_all[sig].max()) if sig.any() else float("nan"),
+                         a_max=float(a_all[sig].max()) if sig.any() else float("nan"), mass_drift=float(drift[i])))
     return rows
 
 
@@ -159,29 +179,36 @@ def format_summary(res) -> str:
     """Text table of a :class:`RunResult`."""
     b = res.built
     cfg = b.cfg
-    lines = [f"jaxcoag run '{cfg['run']['name']}': scene {b.scene.name} {tuple(b.scene.effect_names)}, "
+    n = res.numbers
+    if cfg.engine == "binned":
+        eng = f"binned {cfg['solver']['scheme']} scheme on {b.grid.nbins} bins"
+        work = f"{n['steps']} accepted steps ({n['rejected']} rejected)"
+    else:
+        s = cfg["mc"]
+        eng = (f"Monte Carlo, grouping {s['grouping']}, {s['volume']}, ns_target = {s['ns_target']}, seed = {s['seed']}"
+               f"; output on {b.grid.nbins} bins")
+        work = f"{n['events']} events"
+    fr = cfg["fragmentation"]
+    if fr is None:
+        frag = "pure growth"
+    elif fr["model"] == "shattering":
+        frag = f"fragmentation shattering v_frag = {fr['v_frag']:g} cm/s (St_frag = {st_frag(b):.3g})"
+    else:
+        frag = f"fragmentation to_monomers above m_frag = {fr['m_frag']:g} g"
+    lines = [f"jaxcoag run '{cfg['run']['name']}' ({eng}): scene {b.scene.name} {tuple(b.scene.effect_names)}, "
              f"{cfg['gas']['model']} gas, alpha = {float(b.gas.alpha):.3g}, rho_g = {float(b.gas.rho_g):.4g} g/cm^3, "
              f"T = {float(b.gas.T):.4g} K",
              f"  dust: a0 = {cfg['dust']['a0']:.3g} cm, rho_s = {cfg['dust']['rho_s']:g} g/cm^3, "
              f"dust/gas = {cfg['dust']['dust_to_gas']:g}; grid {b.grid.nbins} bins "
-             f"({cfg['grid']['bins_per_decade']:g}/decade, {b.grid.edges[0]:.3g}..{b.grid.edges[-1]:.3g} g); "
-             + ("pure growth" if b.fragmentation is None else
-                f"fragmentation {cfg['fragmentation']['model']}"
-                + (f" v_frag = {cfg['fragmentation']['v_frag']:g} cm/s (St_frag = {st_frag(b):.3g})"
-                   if cfg['fragmentation']['v_frag'] else "")),
-             f"{'t [yr]':>10} {'m_peak [g]':>11} {'a_peak [cm]':>11} {'St_peak':>9} {'St_max':>9} "
-             f"{'mass drift':>11} {'steps':>6}"]
-    steps = np.concatenate([[0], res.seg_steps])
-    for i, r in enumerate(res.rows):
-        s = int(steps[i]) if i < steps.size else 0
+             f"({cfg['grid']['bins_per_decade']:g}/decade, {b.grid.edges[0]:.3g}..{b.grid.edges[-1]:.3g} g); {frag}",
+             f"{'t [yr]':>10} {'m_peak [g]':>11} {'a_peak [cm]':>11} {'St_peak':>9} {'St_max':>9} {'mass drift':>11}"]
+    for r in res.rows:
         lines.append(f"{r['t_yr']:10.4g} {r['m_peak']:11.4g} {r['a_peak']:11.4g} {r['st_peak']:9.3g} "
-                     f"{r['st_max']:9.3g} {r['mass_drift']:11.2e} {s:6d}")
-    n = res.numbers
-    lines.append(f"result: {n['result']}; {n['steps']} accepted steps ({n['rejected']} rejected) in "
-                 f"{n['segments_done']} segments; wall {res.wall_s:.1f} s"
-                 + (f" (resumed from segment {res.resumed_from})" if res.resumed_from else ""))
-    if not res.finished:
-        lines.append(f"stopped after {n['segments_done']} of {len(b.ts) - 1} segments; continue with --resume")
+                     f"{r['st_max']:9.3g} {r['mass_drift']:11.2e}")
+    lines.append(f"result: {n['result']}; {work}; {n['outputs_done']} of {len(b.t_out)} outputs; wall "
+                 f"{res.wall_s:.1f} s" + (f" (resumed after output {res.resumed_from})" if res.resumed_from else ""))
+    if not res.finished and not res.failed:
+        lines.append(f"stopped after {n['outputs_done']} of {len(b.t_out)} outputs; continue with --resume")
     for label, p in (("netCDF", res.path), ("figure", res.figure), ("checkpoint", res.checkpoint)):
         if p:
             lines.append(f"{label}: {p}")
@@ -196,8 +223,6 @@ def check_writable(path, what="output file", flag="--out"):
 
     Arguments: path; what: name of the file in the message; flag: the option to change.
     """
-    import tempfile
-
     p = os.path.abspath(os.fspath(path))
     if os.path.isdir(p):
         raise JaxcoagInputError(f"the {what} {path!r} is a directory; give a file name with {flag}.")
@@ -245,31 +270,46 @@ def _as_config(cfg):
     return cfg
 
 
+def _work(cfg, result):
+    """The engine's work counters for the summary."""
+    if cfg.engine == "binned":
+        return dict(steps=int(result.stats["steps"]), rejected=int(result.stats["rejected"]))
+    return dict(events=int(np.asarray(result.n_events)))
+
+
 def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, figure=None, max_segments=None,
         quick=False, verbose=True, save=True) -> RunResult:
-    """Run a configuration: validate, integrate with checkpoints, save netCDF + panel, summarise.
+    """Run a configuration with its engine: validate, evolve with checkpoints, save netCDF + panel, summarise.
+
+    The run always goes output time by output time (:func:`jaxcoag.checkpoint.run_segments`, one
+    segment per output time), with or without a checkpoint file, so an interrupted and resumed run
+    equals an uninterrupted one bit for bit, and a run with a checkpoint equals one without.
 
     Arguments:
         cfg: RunConfig, a TOML path, a dict or None (the built-in default, :func:`config.default`).
         out: netCDF path (default ``[output] path``); the panel PNG goes next to it (run.png).
         checkpoint: checkpoint path; None = ``[output] checkpoint`` or ``<out>.ckpt.npz``;
             False = no checkpoint.
-        resume: continue from the checkpoint (refused if it belongs to another configuration).
-        progress: tqdm bar over the segments (stderr).
+        resume: continue from the checkpoint (refused if it belongs to another configuration;
+            starts afresh if there is none); False overwrites an existing checkpoint.
+        progress: tqdm bar over the output times (stderr).
         figure: save the panel (default ``[output] figure``).
-        max_segments: stop after this many new segments (resume later).
+        max_segments: stop after this many new output times (resume later).
         quick: shrink the config with :func:`quick_config` (tests, smoke runs).
         verbose: print the summary table; save: write the checkpoint, netCDF and PNG (False:
-            write nothing at all, no directory either; a checkpoint is still read for ``resume``).
+            write nothing at all, no directory either; a checkpoint is still read for ``resume``,
+            the run continuing on a temporary copy).
 
     Returns: :class:`RunResult`. Raises JaxcoagInputError before computing or writing anything
     for a bad configuration, a grid too large for the memory (:func:`config.check_memory`), an
     output location that cannot be written (:func:`check_writable`) or a checkpoint that is
     unreadable, corrupted or from another configuration (with ``resume``). Ctrl-C raises
-    :class:`jaxcoag.checkpoint.RunInterrupted` after checkpointing the completed segments.
+    :class:`jaxcoag.checkpoint.RunInterrupted` after checkpointing the completed output times.
     """
     from . import checkpoint as ckmod
-    from . import io
+    from ._engine import evolve
+    from ._status import FAILURES, RESULT_NAMES, result_code
+    from .io import save_netcdf
 
     t_start = time.perf_counter()
     cfg = _as_config(cfg)
@@ -279,6 +319,9 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
     out = os.fspath(out) if out is not None else cfg["output"]["path"]
     if not out or out.endswith(os.sep) or os.path.isdir(out):
         raise JaxcoagInputError(f"--out must name a netCDF file (e.g. results/run.nc), got {out!r}.")
+    if max_segments is not None and (isinstance(max_segments, bool) or not isinstance(max_segments, int)
+                                     or max_segments < 1):
+        raise JaxcoagInputError(f"--max-segments must be a positive integer, got {max_segments!r}.")
     if figure is None:
         figure = cfg["output"]["figure"]
     if checkpoint is None:
@@ -292,87 +335,74 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
         if checkpoint:
             check_writable(checkpoint, "checkpoint", "--checkpoint (or use --no-checkpoint)")
     built = cfgmod.build(cfg)
-    scheme = built.scheme
-    y0 = scheme.init(built.grid, jnp.asarray(built.n0))
-    if resume and checkpoint and os.path.exists(checkpoint):  # refuse a mismatch before writing anything
-        ckmod.load_checkpoint(checkpoint, config_hash=cfg.physics_hash(), ts=built.ts, ny=int(y0.shape[0]))
-    if save and checkpoint:  # the netCDF directory is made when the result is saved (none if interrupted)
+    resumed_from = 0
+    if resume and checkpoint and os.path.exists(checkpoint):  # refuse a damaged file before writing anything
+        resumed_from = int(ckmod.read_info(checkpoint)["n_done"])
+    tmpdir = None
+    ck_run = checkpoint
+    if not save:
+        if resume and checkpoint and os.path.exists(checkpoint):  # continue on a copy: the file stays as it was
+            tmpdir = tempfile.mkdtemp(prefix="jaxcoag-run-")
+            ck_run = os.path.join(tmpdir, os.path.basename(checkpoint))
+            shutil.copyfile(checkpoint, ck_run)
+        else:
+            ck_run = None
+    elif checkpoint:  # the netCDF directory is made when the result is saved (none if interrupted)
         _makedirs_for(checkpoint)
-
-    seg = ckmod.integrate(built.kernel, built.grid, y0, built.ts, scheme=scheme, fragmentation=built.fragmentation,
-                          solver=built.solver, rtol=built.rtol, atol=built.atol, max_steps=built.max_steps,
-                          checkpoint=checkpoint, resume=resume, config_hash=cfg.physics_hash(), progress=progress,
-                          max_segments=max_segments, desc=f"jaxcoag run {cfg['run']['name']}", save=save)
+    n_seg = len(built.t_out)
+    try:
+        result = evolve(built.kernel, built.engine, built.initial, jnp.asarray(built.t_out), t0=0.0,
+                        outcome=built.outcome, key=built.key, checkpoint=ck_run, every=1,
+                        resume=bool(resume), progress=progress,
+                        max_segments=n_seg if max_segments is None else max_segments, throw=False)
+    except ckmod.RunInterrupted as e:
+        if not save:
+            e.checkpoint = None
+        raise
+    finally:
+        if tmpdir is not None:
+            shutil.rmtree(tmpdir, ignore_errors=True)
     if not save:
         checkpoint = None  # nothing was written
-    sol = seg.solution
-    rows = summary_rows(sol, built.kernel)
-    from .binned import result_code
-    from .io import result_table
-    rname = result_table()[int(np.asarray(result_code(sol.result)))][0]
+    rname = RESULT_NAMES[int(np.asarray(result_code(result.status)))]
+    failed = rname in FAILURES
+    n_done = int(np.shape(result.t)[0])
+    finished = n_done == n_seg and not failed
+    ds = result.to_xarray(kernel=built.kernel, edges=np.asarray(built.grid.edges), attrs=_attrs(cfg, built))
+    if failed:  # keep the outputs before the failure (a failed solve leaves NaN/inf at its own output)
+        ok = np.all(np.isfinite(ds["mass_per_bin"].values), axis=1)
+        k = int(np.argmin(ok)) if not ok.all() else ok.size
+        ds = ds.isel(t=slice(0, max(k, 1)))
+    rows = summary_rows(ds, built.kernel)
+    sf = st_frag(built)
     numbers = dict(m_peak=rows[-1]["m_peak"], a_peak=rows[-1]["a_peak"], st_peak=rows[-1]["st_peak"],
-                   st_max=rows[-1]["st_max"], max_abs_mass_drift=float(np.max(np.abs(np.asarray(sol.mass_drift)))),
-                   steps=int(sol.stats["steps"]), rejected=int(sol.stats["rejected"]), result=rname,
-                   segments_done=seg.n_segments_done, st_frag=st_frag(built), t_end_yr=rows[-1]["t_yr"])
+                   st_max=rows[-1]["st_max"], max_abs_mass_drift=float(np.max(np.abs(ds["mass_drift"].values))),
+                   result=rname, outputs_done=int(ds.sizes["t"]), st_frag=sf, t_end_yr=rows[-1]["t_yr"], **_work(cfg, result))
     path = fig = None
-    wall = time.perf_counter() - t_start
-    if save and (seg.finished or seg.failed):
-        attrs = _attrs(cfg, built)
-        attrs["wall_s"] = wall
-        attrs["segments"] = seg.n_segments_done
-        sf = st_frag(built)
+    if save and (finished or failed):
+        ds.attrs["wall_s"] = time.perf_counter() - t_start
+        ds.attrs["outputs_done"] = n_done
         m_fr, a_fr = frag_limited_size(built.kernel, sf)
         if np.isfinite(sf):  # fragmentation barrier (Birnstiel et al. 2012): St, mass [g], radius [cm]
-            attrs.update(st_frag=sf, m_frag_limit_g=m_fr, a_frag_limit_cm=a_fr)
-        ds = io.to_xarray(sol, attrs=attrs, kernel=built.kernel)
-        ds["segment_steps"] = (("segment",), np.asarray(seg.seg_steps[:seg.n_segments_done], np.int64),
-                               {"units": "1", "long_name": "accepted solver steps per output interval"})
+            ds.attrs.update(st_frag=sf, m_frag_limit_g=m_fr, a_frag_limit_cm=a_fr)
         _makedirs_for(out)
-        path = io.save_netcdf(ds, out)
+        path = save_netcdf(ds, out)
         if figure:
             from .plot import panel
             fig = figure_path(out)
             where = (f"n = {cfg['gas']['n']:.3g} cm^-3 cloud core" if cfg["gas"]["model"] == "molecular_cloud"
                      else f"alpha = {float(built.gas.alpha):.2g}, R = {float(built.gas.R) / C.AU:.3g} AU")
-            panel(sol, built.kernel, path=fig, title=f"{cfg['run']['name']}: {built.scene.name}, {where}",
-                  frag_limit=(m_fr, a_fr, sf) if np.isfinite(m_fr) else None)
-    res = RunResult(solution=sol, built=built, path=path, figure=fig, checkpoint=checkpoint, finished=seg.finished,
-                    wall_s=time.perf_counter() - t_start, rows=rows, numbers=numbers, seg_steps=seg.seg_steps,
-                    seg_wall_s=seg.seg_wall_s, resumed_from=seg.resumed_from, failed=seg.failed)
+            panel(ds, built.kernel, path=fig, title=f"{cfg['run']['name']} ({built.engine.name}): {built.scene.name}, "
+                  f"{where}", frag_limit=(m_fr, a_fr, sf) if np.isfinite(m_fr) else None)
+    res = RunResult(result=result, dataset=ds, built=built, path=path, figure=fig, checkpoint=checkpoint,
+                    finished=finished, failed=failed, resumed_from=resumed_from, rows=rows, numbers=numbers,
+                    wall_s=time.perf_counter() - t_start)
     if verbose:
         print(format_summary(res))
     return res
 
 
 # ------------------------------------------------------------------ reading saved runs back
-def solution_from_dataset(ds):
-    """A :class:`~jaxcoag.binned.BinnedSolution` from a dataset written by :func:`run` /
-    :func:`jaxcoag.io.save_netcdf` (``ys`` holds mass per bin and the gel mass)."""
-    from .binned import BinnedSolution, MassGrid, RESULTS
-    from .io import result_table
-
-    need = ("mass_per_bin", "number_per_bin", "gel_mass", "mass_drift", "time", "mass_edge")
-    miss = [k for k in need if k not in ds.variables]
-    if miss:
-        raise JaxcoagInputError(f"this netCDF file is not a jaxcoag binned solution (missing {miss}).")
-    if ds["mass_per_bin"].ndim != 2:
-        raise JaxcoagInputError(f"this file holds {ds['mass_per_bin'].ndim - 2} extra dimension(s) "
-                                f"{list(ds['mass_per_bin'].dims[:-2])} (a sweep?); select one member first, e.g. "
-                                "ds.isel(alpha=0), or plot a file written by `jaxcoag run`.")
-    grid = MassGrid.from_edges(np.asarray(ds["mass_edge"].values))
-    code = int(ds["result_code"].values) if "result_code" in ds else 0
-    name = result_table().get(code, ("successful",))[0]
-    rho = jnp.asarray(ds["mass_per_bin"].values)
-    gel = jnp.asarray(ds["gel_mass"].values)
-    steps = int(ds["steps"].values) if "steps" in ds else 0
-    rej = int(ds["rejected_steps"].values) if "rejected_steps" in ds else 0
-    return BinnedSolution(ts=jnp.asarray(ds["time"].values), ys=jnp.concatenate([rho, gel[:, None]], axis=1),
-                          mass_per_bin=rho, number_per_bin=jnp.asarray(ds["number_per_bin"].values), gel_mass=gel,
-                          mass_drift=jnp.asarray(ds["mass_drift"].values), result=getattr(RESULTS, name),
-                          stats={"steps": jnp.asarray(steps), "rejected": jnp.asarray(rej),
-                                 "num_steps": jnp.asarray(steps + rej)}, grid=grid)
-
-
 def kernel_from_dataset(ds):
     """The physical kernel recorded in a run file's ``config_toml`` attribute, or None."""
     text = ds.attrs.get("config_toml")
@@ -397,10 +427,10 @@ def _sweep_name(name):
 
 
 def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=None, progress=None, figure=True):
-    """Sweep scalar parameters of a configuration (outer product) in one compiled program.
+    """Sweep scalar parameters of a configuration (outer product) in one compiled program (binned engine).
 
     Arguments:
-        cfg: RunConfig / TOML path / dict / None (default run).
+        cfg: RunConfig / TOML path / dict / None (default run); ``[run] engine`` must be "binned".
         params: dict name -> list of values; names are keys of :data:`config.SWEEPABLE`
             ("alpha", "v_frag", "rho_s", ... or "gas.alpha"). Every member is validated as a
             config first (a bad value is refused before any computation). Sweeping rho_s keeps
@@ -412,18 +442,23 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
             then run in blocks of ``chunk`` from Python (:func:`jaxcoag.sweep.sweep`).
         figure: with ``out``, also save :func:`jaxcoag.plot.sweep_panel` next to it (sweep.png).
 
-    Returns: (xarray.Dataset, list of row dicts). The dataset holds mass_per_bin (params...,
-    time, mass), status per member, ``mass_peak`` [g] at the last output time, the grain radius
-    ``a`` [cm] and Stokes number ``St`` [1] of the bin centres per member (params..., mass; from
-    each member's kernel, i.e. its rho_s and gas state), coords ``time`` [s] and ``t_yr`` [yr],
-    and the config. The figure path is ``ds.attrs["figure"]`` when one was saved.
+    Returns: (xarray.Dataset, list of row dicts). The dataset holds mass_per_bin (params..., t,
+    m), status per member, ``mass_peak`` [g] at the last output time, the grain radius ``a`` [cm]
+    and Stokes number ``St`` [1] of the bin centres per member (params..., m; from each member's
+    kernel, i.e. its rho_s and gas state), coords ``t`` [s] and ``t_yr`` [yr], and the config.
+    The figure path is ``ds.attrs["figure"]`` when one was saved.
     """
     from . import io
     from . import sweep as swmod
+    from ._engine import evolve
+    from ._status import RESULT_NAMES
 
     cfg = _as_config(cfg)
     if quick:
         cfg = quick_config(cfg)
+    if cfg.engine != "binned":
+        raise JaxcoagInputError(f"[run] engine = {cfg.engine!r}: `jaxcoag sweep` runs the binned engine; use "
+                                "--set run.engine=binned (or sweep Monte Carlo runs with jaxcoag.sweep over keys).")
     if not params:
         raise JaxcoagInputError("give at least one --param name=v1,v2,... to sweep.")
     if out is not None:  # an unwritable output is refused before the sweep is computed
@@ -451,10 +486,10 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     n_unit = np.asarray(built.n0) / (cfg["dust"]["dust_to_gas"] * rho_g0)  # per unit dust density
     scene = built.scene
     grid = built.grid
-    ts = jnp.asarray(built.ts)
-    so = cfg["solver"]
-    solver = built.solver
+    engine = built.engine
+    t_out = jnp.asarray(built.t_out)
     dotted_of = {v: k for k, v in names.items()}
+    m0 = cfg["dust"]["m0"]
 
     def fn(**kw):
         over = {s: {} for s in ("gas", "dust", "fragmentation")}
@@ -465,10 +500,8 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
         du = dict(cfg["dust"], **over["dust"])
         kern = scene.kernel(gas, rho_s=du["rho_s"])
         n0 = jnp.asarray(n_unit) * (du["dust_to_gas"] * gas.rho_g)
-        frag = cfgmod.make_fragmentation(frag0, **over["fragmentation"])
-        from .binned import solve_binned
-        return solve_binned(kern, grid, n0, ts, scheme=so["scheme"], order=so["order"], fragmentation=frag,
-                            solver=solver, rtol=so["rtol"], atol=so["atol"], max_steps=so["max_steps"], throw=False)
+        outcome = cfgmod.make_outcome(frag0, m0=m0, **over["fragmentation"])
+        return evolve(kern, engine, n0, t_out, t0=0.0, outcome=outcome, throw=False)
 
     sweep_params = {names[_sweep_name(k)[0]]: np.asarray(v) for k, v in params.items()}
     attrs = {"config_toml": cfg.to_toml(), "config_hash": cfg.physics_hash(), "scene": scene.name,
@@ -479,7 +512,7 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     ds = swmod.sweep(fn, sweep_params, chunk=chunk, attrs=attrs,
                      progress=f"jaxcoag sweep {cfg['run']['name']}" if progress else False)
     wall = time.perf_counter() - t0
-    rho_last = ds["mass_per_bin"].isel(time=-1).values
+    rho_last = ds["mass_per_bin"].isel(t=-1).values
     flat = rho_last.reshape(-1, rho_last.shape[-1])
     mp = np.array([float(diagnostics.mass_peak(r, grid)) if np.all(np.isfinite(r)) else np.nan for r in flat])
     pdims = tuple(sweep_params)
@@ -488,10 +521,10 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     # grain radius and Stokes number of the bin centres in every member's own gas / material
     a_m = np.empty(rho_last.shape[:-1] + (grid.nbins,))
     st_m = np.empty_like(a_m)
-    mesh0 = np.meshgrid(*[sweep_params[k] for k in pdims], indexing="ij")
+    mesh = np.meshgrid(*[sweep_params[k] for k in pdims], indexing="ij")
     for idx in np.ndindex(*a_m.shape[:-1]):
         over = {s: {} for s in ("gas", "dust")}
-        for k, mm in zip(pdims, mesh0):
+        for k, mm in zip(pdims, mesh):
             sec, key = dotted_of[k].split(".")
             if sec in over:
                 over[sec][key] = float(mm[idx])
@@ -500,38 +533,35 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
                                 grid.centers)
         a_m[idx], st_m[idx] = pc["a"][1], pc["St"][1]
     pc = io.particle_coords(built.kernel, grid.centers)  # names and units of the coordinates
-    ds["a"] = (pdims + ("mass",), a_m, pc["a"][2])
-    ds["St"] = (pdims + ("mass",), st_m, dict(pc["St"][2], long_name="Stokes number tau_f / t_L of the "
-                                                                      "bin-center mass in the member's gas"))
+    ds["a"] = (pdims + ("m",), a_m, pc["a"][2])
+    ds["St"] = (pdims + ("m",), st_m, dict(pc["St"][2], long_name="Stokes number tau_f / t_L of the "
+                                                                   "bin-center mass in the member's gas"))
     ds.attrs["wall_s"] = wall
-    from .io import result_table
-    table = result_table()
     rows = []
-    mesh = np.meshgrid(*[sweep_params[k] for k in pdims], indexing="ij")
     status = ds["status"].values.ravel()
-    drift = ds["mass_drift"].isel(time=-1).values.ravel()
+    drift = ds["mass_drift"].isel(t=-1).values.ravel()
     for i in range(mp.size):
         row = {k: float(m.ravel()[i]) for k, m in zip(pdims, mesh)}
-        row.update(status=table[int(status[i])][0], m_peak=float(mp[i]), mass_drift=float(drift[i]))
+        row.update(status=RESULT_NAMES[int(status[i])], m_peak=float(mp[i]), mass_drift=float(drift[i]))
         rows.append(row)
     path = None
     if out is not None:
         out = os.fspath(out)
         os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
         if figure:
-            from .plot import sweep_panel
             ds.attrs["figure"] = figure_path(out)
         path = io.save_netcdf(ds, out)
         if figure:
+            from .plot import sweep_panel
             sweep_panel(ds, path=ds.attrs["figure"], title=f"jaxcoag sweep of '{cfg['run']['name']}' ({scene.name}), "
-                        f"t_end = {float(built.ts[-1]) / C.yr:.4g} yr")
+                        f"t_end = {float(built.t_out[-1]) / C.yr:.4g} yr")
     if verbose:
         hdr = " ".join(f"{k:>12}" for k in pdims) + f" {'status':>18} {'m_peak [g]':>11} {'mass drift':>11}"
         print(f"jaxcoag sweep of '{cfg['run']['name']}' over {list(pdims)}: {mp.size} members, "
-              f"t_end = {float(built.ts[-1]) / C.yr:.4g} yr, {wall:.1f} s")
+              f"t_end = {float(built.t_out[-1]) / C.yr:.4g} yr, {wall:.1f} s")
         print(hdr)
         for r in rows:
-            print(" ".join(f"{r[k]:12.4g}" for k in pdims) + f" {r['status'] or 'successful':>18} "
+            print(" ".join(f"{r[k]:12.4g}" for k in pdims) + f" {r['status']:>18} "
                   f"{r['m_peak']:11.4g} {r['mass_drift']:11.2e}")
         print(f"{int(ds.attrs['n_failed'])} failed" + (f"; saved {path}" if path else "")
               + (f" and {ds.attrs['figure']}" if path and "figure" in ds.attrs else ""))

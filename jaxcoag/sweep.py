@@ -4,16 +4,25 @@
 point of the outer product (``grid="outer"``) or for matched tuples (``grid="zip"``) in ONE
 compiled, vmapped program and returns an ``xarray.Dataset`` labelled by the parameters, with
 a ``status`` per member. ``fn`` typically builds a kernel from its arguments and calls
-``solve_binned(..., throw=False)``; it may return
+``jaxcoag.evolve(kernel, engine, initial, t_out, throw=False)``; it may return
 
-* a :class:`~jaxcoag.binned.BinnedSolution` - the dataset then holds ``mass_per_bin``
-  [g cm^-3] and ``number_per_bin`` [cm^-3] (params..., time, mass), ``gel_mass``,
-  ``mass_drift``, ``steps`` and ``status`` = the solution's RESULTS code;
+* a result of ``evolve`` (:class:`jaxcoag.BinnedResult`; any engine's result whose binned view
+  has fixed edges, e.g. :class:`jaxcoag.MCResult` with ``sweep(..., edges=...)``) - the dataset
+  then has the layout of ``result.to_xarray()`` with the parameters in front: ``mass_per_bin``
+  [g cm^-3] and ``number_per_bin`` [cm^-3] (params..., t, m), ``gel_mass`` [g cm^-3] and
+  ``mass_drift`` [1] (params..., t) where the result has them (``gel_mass`` as an array: the binned
+  engine's mass beyond its grid; as a method ``gel_mass(edges)``: mass above the top edge),
+  ``steps`` (binned), coords ``t`` [s], ``t_yr`` [yr], ``m`` [g], ``m_edge`` [g], and
+  ``status`` = the member's :class:`jaxcoag.RESULTS` code;
 * a dict of arrays (or one array, named ``value``); an optional entry ``"result"`` holding
-  a RESULTS item (e.g. ``sol.result``) gives the status, otherwise a member's status is
+  a RESULTS item (e.g. ``res.status``) gives the status, otherwise a member's status is
   ``nonfinite`` when any of its outputs is NaN/inf and ``successful`` otherwise.
 
-**Failures are values.** Solve with ``throw=False``: a member that hits ``max_steps`` or goes
+A Monte Carlo engine sweeps the same way, vmapped over kernel parameters or over random keys
+(``key=jax.random.fold_in(base, seed.astype(jnp.uint32))`` from a swept ``seed``); its automatic
+bins depend on the data, so give the bins with ``edges=``.
+
+**Failures are values.** Evolve with ``throw=False``: a member that hits ``max_steps`` or goes
 non-finite gets that status while the others finish normally. NaN/inf parameter values are
 refused up front, or with ``invalid="flag"`` those members are skipped and get the status
 ``invalid_parameters``. (With ``throw=True`` inside a
@@ -138,37 +147,70 @@ def parameter_points(params, grid="outer", *, allow_nonfinite=False):
     return {k: m.ravel() for k, m in zip(params, mesh)}, shape
 
 
-def _is_solution(x):
-    from .binned import BinnedSolution
-    return isinstance(x, BinnedSolution)
-
-
 def _is_result(x):
-    from .binned import RESULTS
+    from ._engine import AbstractResult
+    return isinstance(x, AbstractResult)
+
+
+def _is_status(x):
+    from ._status import RESULTS
     return isinstance(x, RESULTS)
 
 
-def _member_fn(fn, names, meta):
-    """fn of keyword args -> flat dict of arrays (incl. 'status' int32); records the grid in meta."""
-    from .binned import RESULT_NAMES, result_code
+def _result_outputs(out, edges, meta):
+    """Member outputs of an engine result: its binned view on ``edges`` (None: the engine's own,
+    which must not depend on the data), the per-time totals it has, and its RESULTS code."""
+    from ._status import result_code
+
+    try:
+        e = np.asarray(out.bin_edges(edges), np.float64)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,
+            jax.errors.TracerBoolConversionError, jax.errors.TracerIntegerConversionError) as err:
+        raise JaxcoagInputError(f"the bins of a {type(out).__name__} depend on the data (automatic edges), which a "
+                                "vmapped sweep cannot use: pass fixed bins, sweep(..., edges=np.geomspace(m_lo, m_hi, "
+                                "nb + 1)) in g.") from err
+    meta["edges"] = e
+    rho = out.mass_per_bin(edges)
+    flat = {"mass_per_bin": rho, "number_per_bin": out.number_per_bin(edges), "t": out.t}
+    gel = getattr(out, "gel_mass", None)
+    if callable(gel):  # an engine whose mass beyond the top depends on the bins
+        flat["gel_mass"] = gel(edges)
+    elif isinstance(gel, jax.Array) and gel.shape == out.t.shape:  # beyond the engine's own grid (binned)
+        # on other edges, the mass the re-binned view no longer holds counts as beyond the bins
+        # (as result.to_xarray(edges=...))
+        flat["gel_mass"] = gel if edges is None else gel + jnp.sum(out.mass_per_bin(), axis=-1) - jnp.sum(rho, axis=-1)
+    drift = getattr(out, "mass_drift", None)
+    if isinstance(drift, jax.Array) and drift.shape == out.t.shape:
+        flat["mass_drift"] = drift
+    stats = getattr(out, "stats", None)
+    if isinstance(stats, dict) and "steps" in stats:
+        flat["steps"] = jnp.asarray(stats["steps"])
+    flat["status"] = result_code(out.status)
+    return flat
+
+
+def _member_fn(fn, names, meta, edges):
+    """fn of keyword args -> flat dict of arrays (incl. 'status' int32); records the bin edges of
+    result outputs in meta."""
+    from ._status import RESULT_NAMES, result_code
 
     def one(*vals):
         out = fn(**dict(zip(names, vals)))
-        if _is_solution(out):
-            meta["grid"] = out.grid
-            return {"mass_per_bin": out.mass_per_bin, "number_per_bin": out.number_per_bin,
-                    "gel_mass": out.gel_mass, "mass_drift": out.mass_drift, "t": out.ts,
-                    "steps": jnp.asarray(out.stats["steps"]), "status": result_code(out.result)}
+        if _is_result(out):
+            return _result_outputs(out, edges, meta)
+        if edges is not None:
+            raise JaxcoagInputError("edges= applies when fn returns an engine result (jaxcoag.evolve); fn returned "
+                                    f"a {type(out).__name__}.")
         if not isinstance(out, dict):
             out = {"value": out}
         flat, res = {}, None
         for k, v in out.items():
-            if k == "result" and _is_result(v):
+            if k == "result" and _is_status(v):
                 res = v
                 continue
             if not isinstance(k, str) or k == "status":
                 raise JaxcoagInputError(f"fn output keys must be strings other than 'status' (got {k!r}); "
-                                        "return the RESULTS item under 'result'.")
+                                        "return the jaxcoag.RESULTS item under 'result'.")
             v = jnp.asarray(v)
             if not (jnp.issubdtype(v.dtype, jnp.number) or v.dtype == jnp.bool_):
                 raise JaxcoagInputError(f"fn output {k!r} must be numeric arrays.")
@@ -208,11 +250,12 @@ def _gather(x):
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled(fn, names, chunk, mesh, ncols):
+def _compiled(fn, names, chunk, mesh, ncols, edges):
     """Jitted (optionally shard_mapped) batched program for fn; cached so repeated sweeps of the
-    same function reuse the compilation. Returns (callable, meta) - meta['grid'] is filled at trace."""
+    same function reuse the compilation (``edges``: a tuple of floats or None). Returns (callable,
+    meta) - meta['edges'] is filled at trace time when fn returns an engine result."""
     meta = {}
-    one = _member_fn(fn, list(names), meta)
+    one = _member_fn(fn, list(names), meta, None if edges is None else np.asarray(edges, np.float64))
 
     def batched(*cs):
         if chunk is None or chunk >= cs[0].shape[0]:
@@ -227,14 +270,14 @@ def _compiled(fn, names, chunk, mesh, ncols):
     return jax.jit(fsh), meta
 
 
-def _run_blocks(fn, names, cols, chunk, progress):
+def _run_blocks(fn, names, cols, chunk, progress, edges):
     """Unsharded evaluation block by block (``chunk`` members per compiled call, the last block
     padded by repeating its last member) with a tqdm bar over the members on stderr."""
     from tqdm.auto import tqdm
 
     n = cols[0].shape[0]
     block = n if chunk is None else min(chunk, n)
-    prog, meta = _compiled(fn, tuple(names), block, None, len(cols))
+    prog, meta = _compiled(fn, tuple(names), block, None, len(cols), edges)
     parts = []
     desc = progress if isinstance(progress, str) else "sweep"
     with tqdm(total=n, desc=desc, unit="member", dynamic_ncols=True) as bar:
@@ -249,12 +292,12 @@ def _run_blocks(fn, names, cols, chunk, progress):
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}, meta
 
 
-def _run(fn, names, cols, chunk, mesh, progress=False):
+def _run(fn, names, cols, chunk, mesh, progress=False, edges=None):
     """Evaluate fn over flat columns (tuple of (N,) arrays); returns (dict of (N, ...) numpy, meta)."""
     n = cols[0].shape[0]
     if progress and mesh is None:
-        return _run_blocks(fn, names, cols, chunk, progress)
-    prog, meta = _compiled(fn, tuple(names), chunk, mesh, len(cols))
+        return _run_blocks(fn, names, cols, chunk, progress, edges)
+    prog, meta = _compiled(fn, tuple(names), chunk, mesh, len(cols), edges)
     if mesh is None:
         out = prog(*[jnp.asarray(c) for c in cols])
         return {k: np.asarray(v) for k, v in out.items()}, meta
@@ -268,14 +311,15 @@ def _run(fn, names, cols, chunk, mesh, progress=False):
 
 
 def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attrs=None, invalid="raise",
-          progress=False):
+          progress=False, edges=None):
     """Evaluate ``fn(**point)`` over a parameter grid in one vmapped (optionally sharded) program.
 
     Arguments:
         fn: function of keyword arguments named as ``params`` (scalar float64 values, in the
-            units the caller chooses, e.g. alpha [-], rho_g [g cm^-3]) returning a
-            BinnedSolution, a dict of arrays (optionally with ``"result"``: a RESULTS item) or an
-            array. Must be traceable (jit/vmap); call ``solve_binned(..., throw=False)`` inside.
+            units the caller chooses, e.g. alpha [-], rho_g [g cm^-3]) returning a result of
+            ``jaxcoag.evolve`` (BinnedResult, MCResult), a dict of arrays (optionally with
+            ``"result"``: a :class:`jaxcoag.RESULTS` item) or an array. Must be traceable
+            (jit/vmap); call ``jaxcoag.evolve(..., throw=False)`` inside.
         params: dict name -> 1-D array of finite values (non-empty).
         grid: "outer" (every combination; dims = the parameter names in dict order) or "zip"
             (matched tuples; one dim ``member`` with the parameters as coordinates on it).
@@ -296,12 +340,16 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
             (one compiled vmapped program per block, the last block padded) so that the bar
             advances after each block; without ``chunk`` there is one block. Ignored when
             sharded (``mesh``/``devices``), where all members run in one program.
+        edges: mass-bin edges [g] (1-D increasing) of the binned view when fn returns an engine
+            result; default None = the engine's own bins (the binned grid). Needed for Monte Carlo
+            results, whose automatic bins depend on the data.
 
     Returns:
         xarray.Dataset with the parameters as coordinates, the outputs as variables (extra
-        output axes named ``time``/``mass`` for solutions, ``<name>_dim<i>`` otherwise),
-        ``status`` (int32 RESULTS code, 0 = successful; attrs ``flag_values``/``flag_meanings``)
-        and attrs ``n_members``, ``n_failed``.
+        output axes named ``t``/``m`` for results, ``<name>_dim<i>`` otherwise),
+        ``status`` (int32 :class:`jaxcoag.RESULTS` code, 0 = successful; attrs
+        ``flag_values``/``flag_meanings``) and attrs ``n_members``, ``n_failed`` (members whose
+        status is one of :data:`jaxcoag.FAILURES`).
 
     References: JAX ``vmap``, ``lax.map``, ``shard_map``; docs/design_notes.md, house style ("failures are values").
     """
@@ -337,9 +385,15 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         hash(fn)
     except TypeError as e:
         raise JaxcoagInputError("fn must be hashable (a function or a hashable callable object).") from e
-    out, meta = _run(fn, names, cols, chunk, mesh, progress)
+    if edges is not None:
+        e = np.asarray(getattr(edges, "edges", edges), np.float64)
+        if e.ndim != 1 or e.size < 2 or not np.all(np.isfinite(e)) or np.any(e <= 0) or np.any(np.diff(e) <= 0):
+            raise JaxcoagInputError("edges must be a 1-D, positive, strictly increasing array of >= 2 mass-bin edges "
+                                    "in g (or a MassGrid).")
+        edges = tuple(float(x) for x in e)
+    out, meta = _run(fn, names, cols, chunk, mesh, progress, edges)
     if bad.any():
-        from .binned import RESULT_NAMES
+        from ._status import RESULT_NAMES
         for k, v in out.items():
             if k == "status":
                 out[k] = np.where(bad, np.int32(RESULT_NAMES.index("invalid_parameters")), v).astype(np.int32)
@@ -355,42 +409,48 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         pdims = ("member",)
         coords = {k: ("member", points[k]) for k in names}
         coords["member"] = ("member", np.arange(shape[0]))
-    solution = "grid" in meta  # fn returned a BinnedSolution (recorded at trace time)
+    result = "edges" in meta  # fn returned an engine result (recorded at trace time)
     data = {}
     for k, v in out.items():
         v = v.reshape(shape + v.shape[1:])
-        if solution and k == "t":
+        if result and k == "t":
             continue
         extra = v.ndim - len(shape)
-        if solution and k in ("mass_per_bin", "number_per_bin"):
-            dims = pdims + ("time", "mass")
-        elif solution and k in ("gel_mass", "mass_drift"):
-            dims = pdims + ("time",)
+        if result and k in ("mass_per_bin", "number_per_bin"):
+            dims = pdims + ("t", "m")
+        elif result and k in ("gel_mass", "mass_drift"):
+            dims = pdims + ("t",)
         else:
             dims = pdims + tuple(f"{k}_dim{i}" for i in range(extra))
         data[k] = (dims, v)
     table = result_table()
     codes = sorted(table)
-    status_attrs = {"long_name": "jaxcoag.binned.RESULTS code per member (0 = successful)", "units": "1",
+    status_attrs = {"long_name": "jaxcoag.RESULTS code per member (0 = successful)", "units": "1",
                     "flag_values": np.asarray(codes, np.int32),
                     "flag_meanings": " ".join(table[c][0] for c in codes)}
-    if solution:
+    if result:
+        from .io import time_coords
+
         t = out["t"]
-        units = {"mass_per_bin": "g cm-3", "number_per_bin": "cm-3", "gel_mass": "g cm-3", "mass_drift": "1",
-                 "steps": "1"}
+        units = {"mass_per_bin": ("g cm-3", "dust mass density per mass bin"),
+                 "number_per_bin": ("cm-3", "dust number density per mass bin"),
+                 "gel_mass": ("g cm-3", "mass density above the top mass-bin edge"),
+                 "mass_drift": ("1", "relative total-mass change (M(t) - M(t0)) / M(t0)"),
+                 "steps": ("1", "accepted solver steps")}
         if np.all(t == t[:1]):
-            from .io import time_coords
-            coords.update(time_coords(t[0]))  # time [s] and t_yr [yr]
-        else:
-            data["t"] = (pdims + ("time",), t.reshape(shape + t.shape[1:]), {"units": "s", "long_name": "output times"})
-        g = meta["grid"]
-        coords["mass"] = ("mass", np.asarray(g.centers, np.float64),
-                          {"units": "g", "long_name": "geometric bin-center mass sqrt(m_lo m_hi)"})
-        coords["mass_edge"] = ("mass_edge", np.asarray(g.edges, np.float64), {"units": "g", "long_name": "mass-bin edges"})
-        data = {k: (d[0], d[1], {"units": units.get(k, "1")}) if len(d) == 2 else d for k, d in data.items()}
+            coords.update(time_coords(t[0]))  # t [s] and t_yr [yr]
+        else:  # the members' output times differ: a variable beside the parameters (dim t has no coordinate)
+            data["t_out"] = (pdims + ("t",), t.reshape(shape + t.shape[1:]), {"units": "s", "long_name": "output times"})
+        e = meta["edges"]
+        coords["m"] = ("m", np.sqrt(e[:-1] * e[1:]), {"units": "g", "long_name": "geometric bin-centre mass sqrt(m_lo m_hi)"})
+        coords["m_edge"] = ("m_edge", e, {"units": "g", "long_name": "mass-bin edges"})
+        data = {k: (d[0], d[1], dict(zip(("units", "long_name"), units.get(k, ("1", k))))) if len(d) == 2 else d
+                for k, d in data.items()}
     data["status"] = (data["status"][0], np.asarray(data["status"][1], np.int32), status_attrs)
     ds = xr.Dataset(data_vars=data, coords=coords)
-    nfail = int(np.sum(np.asarray(out["status"]) != 0))
+    from ._status import FAILURES, RESULT_NAMES
+
+    nfail = int(np.sum(np.isin(np.asarray(out["status"]), [RESULT_NAMES.index(n) for n in FAILURES])))
     ds.attrs.update({"n_members": int(math.prod(shape)), "n_failed": nfail, "grid": grid,
                      "n_devices": 1 if mesh is None else int(math.prod(mesh.devices.shape))})
     if attrs:

@@ -1,15 +1,15 @@
 """Thesis ch. 2 (Ormel, Spaans & Tielens 2007): porous vs compact growth until rain-out (T-Tab2.2, Figs 2.12, 2.14).
 
 Grouped Monte Carlo (``jaxcoag.mc``) with the enlargement factor psi as structural parameter
-(``Scene(porosity="psi")``), the O07 collision recipe through ``jaxcoag.mc.RecipeOutcome`` and the
+(``Scene(porosity="psi")``), the O07 collision recipe through ``jaxcoag.outcomes.RecipeOutcome(O07Recipe(...))`` and the
 rain-out sink tau_f > alpha/Omega (``jaxcoag.mc.RainOutKernel``, eq. 2.25), in the thesis setting
-(``jaxcoag.scenes.ch2_setup``: Hayashi MMSN at z = H_g, t_L = 2 pi/Omega, a0 = 0.1 um, 1 AU quartz
+(``jaxcoag.scenes.mc_setups.ch2_setup``: Hayashi MMSN at z = H_g, t_L = 2 pi/Omega, a0 = 0.1 um, 1 AU quartz
 rho_g/rho_d = 240, 5 AU ice 57; Brownian + Weidenschilling 1984 turbulence fits).
 
 Smaller than the thesis (sqrt(N Ns) = 2e4, 50 runs, to 1e7 yr): const-V equal-mass zoom with
 Ns* = --ns (m* = 2 x the estimated rain-out mass), f_eps = --feps, --runs runs per model (vmapped
 over keys), to --tend yr. The rain-out mass estimate is derived from a run, not from the published
-<psi>: porous models first run ``scenes.ch2_pilot`` (the same setting and shapes, stopped at the first
+<psi>: porous models first run ``mc_setups.ch2_pilot`` (the same setting and shapes, stopped at the first
 rain-out; pass 1 zoomed for psi = 1e3, pass 2 for pass 1's psi) whose <psi>_m near rain-out gives
 m_rain from tau_f(m, psi) = tau_rain (eq. 2.25); the pilot's psi is printed beside the published one
 (a comparison, counted as a check) and the published psi is never an input. Compact: psi = 1. Printed per model beside T-Tab2.2: number means over the rained-out
@@ -41,7 +41,7 @@ smaller; divided by that factor the published masses agree with ours within 0.15
 R1Ta4, R5Ta4 and R5Ta2 (checked below), psi and a/a* within 15 % and t_rain within the output grid's
 step (a factor 1.5 at 40 outputs over 7 decades). (2) The thesis
 takes psi from Ossenkopf's tables for N <= 40 (not available): we switch psi_add off below N = 40
-(``o07_recipe(n_small=40)``); with psi_add from N = 1 psi(64) = 62 in CCA and R1Ta4-P rained out at
+(``O07Recipe(n_small=40)``); with psi_add from N = 1 psi(64) = 62 in CCA and R1Ta4-P rained out at
 <psi> ~ 750, ~8 g. (3) alpha = 1e-6 (rain-out during the small-N Brownian stage, where the
 Ossenkopf surrogate matters most) and 1 AU alpha = 1e-2 (thesis: strong compaction, large spread)
 differ by more than the tolerances at this small Ns*; the script reports them as FAIL rows.
@@ -83,7 +83,7 @@ PILOT_SEED_OFFSET = 1000  # the pilot's runs are independent of the figure's run
 def run_model(name, ns, runs, f_eps, t_end_yr, seed, n_out=40):
     """Run one T-Tab2.1 model; returns (setup dict, MCResult (runs, ...), rainout summary, tracks, pilot).
 
-    Porous models first run ``scenes.ch2_pilot`` (same Ns*, runs, f_eps and output grid, so the
+    Porous models first run ``mc_setups.ch2_pilot`` (same Ns*, runs, f_eps and output grid, so the
     compiled program is shared; seed + PILOT_SEED_OFFSET): its <psi> at the first rain-out sets the
     zoom mass m* = 2 m_rain(psi) (eq. 2.25). The published <psi> is only compared with, never used.
     """
@@ -91,18 +91,20 @@ def run_model(name, ns, runs, f_eps, t_end_yr, seed, n_out=40):
     import jax.numpy as jnp
     import numpy as np
 
-    from jaxcoag import mc, scenes
+    import jaxcoag
+    from jaxcoag import mc
+    from jaxcoag.scenes import mc_setups, tables
 
-    ref = scenes.CH2_TABLE_2_2[name]
+    ref = tables.CH2_TABLE_2_2[name]
     pilot = None
     if ref["porous"]:
-        pilot = scenes.ch2_pilot(ref["R_au"], ref["alpha"], ns_target=ns, runs=runs, seed=seed + PILOT_SEED_OFFSET,
+        pilot = mc_setups.ch2_pilot(ref["R_au"], ref["alpha"], ns_target=ns, runs=runs, seed=seed + PILOT_SEED_OFFSET,
                                  f_eps=f_eps, t_end_yr=t_end_yr, n_out=n_out)
-    st = scenes.ch2_setup(ref["R_au"], ref["alpha"], ref["porous"], ns_target=ns,
-                          psi_est=None if pilot is None else pilot["psi"])
+    st = mc_setups.ch2_setup(ref["R_au"], ref["alpha"], ref["porous"], ns_target=ns,
+                             psi_est=None if pilot is None else pilot["psi"])
     t_out = jnp.logspace(-1.0, math.log10(t_end_yr), n_out) * YR
     K = st["kernel"]
-    res = scenes.ch2_mc_run(st, t_out, jax.random.split(jax.random.key(seed), runs), f_eps=f_eps)
+    res = mc_setups.ch2_mc_run(st, t_out, jax.random.split(jax.random.key(seed), runs), f_eps=f_eps)
     s = mc.rainout_summary(res, K)
     # evolution tracks of the active population (Fig. 2.12): <a>_m / <a*>_m vs <a*>_m
     g = res.w * 2.0 ** res.z
@@ -123,7 +125,7 @@ def run_model(name, ns, runs, f_eps, t_end_yr, seed, n_out=40):
     ident = np.abs(np.where(gone, a_geo, 1.0) / denom - 1.0)[gone]
     s = {k: np.asarray(v) for k, v in s.items()}
     s["ident_err"] = float(ident.max()) if ident.size else 0.0
-    s["status"] = [mc.status_names(int(c)) for c in np.asarray(res.status)]
+    s["status"] = jaxcoag.status_names(res.status)
     s["n_events"] = np.asarray(res.n_events)
     return st, res, s, tracks, pilot
 
@@ -132,10 +134,10 @@ def table_implied_tau_ratio(name):
     """tau_f(<m>, <psi>) / tau_rain implied by a T-Tab2.2 row in our ch. 2 gas (1 if eq. 2.25 matched)."""
     import jax.numpy as jnp
 
-    from jaxcoag import scenes
+    from jaxcoag.scenes import mc_setups, tables
 
-    ref = scenes.CH2_TABLE_2_2[name]
-    st = scenes.ch2_setup(ref["R_au"], ref["alpha"], ref["porous"], ns_target=4, m_end=ref["m"])  # m_end: unused zoom
+    ref = tables.CH2_TABLE_2_2[name]
+    st = mc_setups.ch2_setup(ref["R_au"], ref["alpha"], ref["porous"], ns_target=4, m_end=ref["m"])  # m_end: unused zoom
     x = jnp.array([ref["psi"]]) if st["kernel"].n_struct else None
     tau = float(st["kernel"].base.particles(jnp.asarray(ref["m"]), x).tau_f)
     return tau / st["tau_rain"]
@@ -146,7 +148,7 @@ def main(argv=None):
     _common.enable_x64()
     import numpy as np
 
-    from jaxcoag import scenes
+    from jaxcoag.scenes import tables
 
     quick = args.quick
     models = args.models.split(",") if args.models else (QUICK_MODELS if quick else FULL_MODELS)
@@ -161,12 +163,12 @@ def main(argv=None):
     print(hdr + "\n" + " " * 8 + "   (ours | thesis)")
     for name in models:
         st, res, s, tr, pilot = run_model(name, ns, runs, args.feps, t_end, args.seed)
-        ref = scenes.CH2_TABLE_2_2[name]
+        ref = tables.CH2_TABLE_2_2[name]
         mean = {k: float(np.nanmean(s[k])) for k in ("a", "m", "psi", "a_over_astar", "t_rain", "t_99")}
         mean["t_rain"] /= YR
         mean["t_99"] /= YR
         out[name] = dict(summary=s, tracks=tr, mean=mean, ref=ref, f_rain=s["f_rain"], t=s["t"],
-                         pilot=pilot, m_end=float(st["mc"]["n_particles"]) * st["m0"] / ns)
+                         pilot=pilot, m_end=st["m_end"])
         if pilot is not None:
             print(f"{name:8s} pilot (stop at first rain-out, {len(pilot['psi_passes'])} passes): <psi> "
                   + " -> ".join(f"{v:.3g}" for v in pilot["psi_passes"])
@@ -181,7 +183,7 @@ def main(argv=None):
         checks.add(f"{name}: a = a* psi^1/3 (rained particles)", s["ident_err"], 0.0, tol=1e-12, absolute=True)
     # published table: internal consistency and eq. 2.25 in our gas
     ratios = {}
-    for name, ref in scenes.CH2_TABLE_2_2.items():
+    for name, ref in tables.CH2_TABLE_2_2.items():
         rho_s = 3.0 if ref["R_au"] == 1 else 1.0
         a_calc = (3 * ref["m"] / (4 * math.pi * rho_s)) ** (1 / 3) * ref["psi"] ** (1 / 3)
         # published numbers against each other (no simulation): reported, not counted

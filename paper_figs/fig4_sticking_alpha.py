@@ -2,7 +2,7 @@
 
 What is computed: the collision-rate-weighted sticking fraction of the FIRST generation of
 compound collisions, right after the dust has been accreted (the thesis: "dust is accreted in a
-few 1e2 yr"), for the default ch. 4 setting (``jaxcoag.scenes.setup("ch4_nebula", alpha=...)``:
+few 1e2 yr"), for the default ch. 4 setting (``jaxcoag.scenes.binned_setups.setup("ch4_nebula", alpha=...)``:
 3 AU, Takeuchi & Lin gas, Brownian + OC07 turbulence + radial drift; chondrules lognormal in
 radius, median 300 um, width 0.5, i.e. <a>_m = 720 um). Every chondrule carries a porous rim of
 phi_pd = 0.15 phi_dust(10 um/1 um) = 0.0191; the rim mass grows with the chondrule's geometric
@@ -61,11 +61,11 @@ def sticking_fraction(alpha, n_nodes=12, n_b=16):
     import jax.numpy as jnp
     import numpy as np
 
-    from jaxcoag import scenes
-    from jaxcoag.physics.outcomes import Compound, o08_outcome
+    from jaxcoag.scenes import binned_setups
+    from jaxcoag.physics.ormel08 import Compound, o08_outcome
     from jaxcoag.physics.porosity import phi_dust
 
-    s = scenes.setup("ch4_nebula", alpha=alpha)
+    s = binned_setups.setup("ch4_nebula", alpha=alpha)
     mat = s.material
     _, m, n, f_d = population(s, n_nodes)
     phi_pd = 0.15 * float(phi_dust((10.0) ** (2.0 / 0.95)))
@@ -76,7 +76,7 @@ def sticking_fraction(alpha, n_nodes=12, n_b=16):
     c1 = Compound(m=M1, f_d=np.broadcast_to(f_d[:, None], M1.shape), f_p=full(1.0), phi_pd=full(phi_pd))
     c2 = Compound(m=M2, f_d=np.broadcast_to(f_d[None, :], M1.shape), f_p=full(1.0), phi_pd=full(phi_pd))
     # compound radii for the impact parameter
-    from jaxcoag.physics.outcomes import compound_volume
+    from jaxcoag.physics.ormel08 import compound_volume
     a1 = (3.0 * np.asarray(compound_volume(c1)) / (4.0 * math.pi)) ** (1.0 / 3.0)
     a2 = (3.0 * np.asarray(compound_volume(c2)) / (4.0 * math.pi)) ** (1.0 / 3.0)
     u = (np.arange(n_b) + 0.5) / n_b                       # b = (a1 + a2) sqrt(u), u ~ U(0, 1)
@@ -94,7 +94,7 @@ def main(argv=None):
     import numpy as np
 
     from jaxcoag.physics.contact import Material
-    from jaxcoag.physics.outcomes import Compound, f_comp_o08, o08_outcome
+    from jaxcoag.physics.ormel08 import Compound, f_comp_o08, o08_outcome
 
     checks = _common.Checks("thesis ch. 4: sticking fraction vs alpha (O08, first generation)")
     mat = Material.ch4_silicate()

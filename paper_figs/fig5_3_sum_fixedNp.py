@@ -1,6 +1,7 @@
 """Thesis Fig. 5.3: sum kernel K = (m_i+m_j)/2 with a fixed number of particles (negative control).
 
-Ungrouped constant-N DSMC (``mode="const_n"``, ``grouping=None``), monodisperse start, Table-5.1 units,
+Ungrouped constant-N DSMC (``jaxcoag.MonteCarlo(grouping=None, volume=jaxcoag.mc.ConstantNumber())`` through
+``jaxcoag.evolve``), monodisperse start, Table-5.1 units,
 output t = 1, 10, 20, 30, against the Golovin (1963) solution (M0 = e^{-t/2},
 m_p = M2/M1 = e^t). The method is fine for t < 10, lags at t = 20 and fails at t = 30: the total
 simulated mass M_tot,sim = Np <m>_sim ~ Np e^{15} lies below the analytic peak mass e^{30}
@@ -44,12 +45,14 @@ def simulate_const_n_sum(n_p, runs, seed, times=TIMES):
     import jax
     import jax.numpy as jnp
 
+    import jaxcoag
     from jaxcoag import kernels as K
     from jaxcoag import mc
 
     keys = jax.random.split(jax.random.key(seed), runs)
-    return jax.vmap(lambda k: mc.run(K.Sum(0.5), n_particles=n_p, t_out=jnp.asarray(times), key=k,
-                                     mode="const_n", capacity=n_p + 8))(keys)
+    engine = jaxcoag.MonteCarlo(volume=mc.ConstantNumber(), n_particles=n_p, capacity=n_p + 8)
+    return jax.vmap(lambda k: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0), jnp.asarray(times),
+                                             key=k, throw=False))(keys)
 
 
 def main(argv=None):
@@ -65,16 +68,16 @@ def main(argv=None):
     runs = args.runs or (3 if args.quick else 40)
     print(f"Fig 5.3: K = (m_i+m_j)/2, const-N ungrouped, Np = {n_p}, {runs} runs, t = {TIMES}")
     res = simulate_const_n_sum(n_p, runs, args.seed)
-    status = np.asarray(res.status)
+    status = jaxcoag.status_names(res.status)
     lm0 = np.asarray(res.log_moments(0.0))
     lmp = np.asarray(res.log_moments(2.0) - res.log_moments(1.0))
     mtot = np.asarray(res.M_tot)
     edges = 2.0 ** np.arange(0, 50)
     rho = np.asarray(res.mass_per_bin(jnp.asarray(edges)))
-    print(f"status flags: {sorted(set(status.tolist()))}; events per run: {np.asarray(res.n_events).tolist()}")
+    print(f"status: {sorted(set(status))}; events per run: {np.asarray(res.n_events).tolist()}")
 
     ck = _common.Checks(f"Fig 5.3 (sum kernel, fixed Np={n_p}, {runs} runs)")
-    ck.add("status OK (all runs)", float(np.max(status)), 0.0, 0.0, absolute=True)
+    ck.add("runs not successful", float(sum(s != "successful" for s in status)), 0.0, 0.0, absolute=True)
     rng = np.random.default_rng(args.seed)
     mc_ = np.sqrt(edges[:-1] * edges[1:])
     dm = edges[1:] - edges[:-1]

@@ -1,8 +1,10 @@
 """Thesis Fig. 5.7: runaway time t_R against log N for K = (m_i m_j)^nu, nu = 2 and 3 (N up to 1e160).
 
-Constant-V, distribution zoom (``grouping="distribution"``), monodisperse start, Table-5.1 units (K00 = 1).
+Constant-V, distribution zoom (``jaxcoag.MonteCarlo(grouping=jaxcoag.mc.Distribution(...))``), monodisperse start,
+Table-5.1 units (K00 = 1).
 t_R = first time with M_L1/M_L2 >= 1e4 (M_L2 = second-largest *particle*), or the time a single particle is
-left (thesis §5.3.3; MC hazard 12 in docs/design_notes.md): ``mc.run(..., stop=mc.Runaway(1e4))`` stops each run there and t_R is
+left (thesis §5.3.3; MC hazard 12 in docs/design_notes.md): ``MonteCarlo(..., stop=mc.Runaway(1e4))`` stops each run
+there and t_R is
 ``result.t_stop``. The runs of each N are vmapped in one call.
 
 Expected: t_R decreases with N; local slopes d ln t_R / d ln ln N tend to 1 - nu (Malyshkin & Goodman 2001,
@@ -27,7 +29,7 @@ Resolution (why the options below). The thesis zoom alone (log-mass bins of widt
 moves whole species of the steep seed tail (counts falling by e^{nu-1} per unit mass up to k ~ ln N)
 as one group, and the monomers get ~Ng* groups, so the first events wait ~1/Ng*: measured with
 Ng* = 200-2000, t_R stopped falling with N (nu = 2: 0.092 at 1e20, 0.034 at 1e160 vs the chain's 0.0067;
-nu = 3: t_R *rose* from 1e80 to 1e160). Two refinements of the zoom fix it (mc.run docstring):
+nu = 3: t_R *rose* from 1e80 to 1e160). Two refinements of the zoom fix it (``jaxcoag.mc.Distribution`` docstring):
 ``count_groups`` (bins equally spaced in the cumulative count from the heavy end: every tail species keeps
 >~ 10 groups, the rarest are single particles) and ``tail_events`` (every species sees >= 64 group events
 per elapsed time, at most ``tail_wmax`` groups; this is the thesis' "demagnify so that t_11 << t_R" made
@@ -83,10 +85,10 @@ def _extra(p):
     p.add_argument("--max-events", type=int, default=None, help="event cap per run (default 3e6; quick 4e5)")
     p.add_argument("--seed", type=int, default=5007)
     p.add_argument("--count-groups", type=float, default=None,
-                   help="tail-count zoom refinement G_c (mc.run count_groups; default 10, 0 = off: thesis zoom)")
+                   help="tail-count zoom refinement G_c (Distribution count_groups; default 10, 0 = off: thesis zoom)")
     p.add_argument("--tail-events", type=float, default=None,
-                   help="time-resolution zoom cap (mc.run tail_events; default 64, 0 = off)")
-    p.add_argument("--wmax", type=float, default=1e9, help="most groups per species under the cap (mc.run tail_wmax)")
+                   help="time-resolution zoom cap (Distribution tail_events; default 64, 0 = off)")
+    p.add_argument("--wmax", type=float, default=1e9, help="most groups per species under the cap (Distribution tail_wmax)")
     p.add_argument("--capacity", type=int, default=1024, help="species slots (default 1024)")
 
 
@@ -99,7 +101,7 @@ def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events, tail_events=0.0
                   wmax=None, capacity=None):
     """Mean, s.e. and per-run t_R for each N; returns dict.
 
-    One vmapped call per N over the runs: ``mc.run(..., stop=mc.Runaway(1e4))`` stops each run at the
+    One vmapped call per N over the runs: ``MonteCarlo(..., stop=mc.Runaway(1e4))`` stops each run at the
     first event after which M_L1/M_L2 >= 1e4 or a single particle is left; t_R = ``t_stop``.
     Runs that end otherwise (event cap) count as missing.
     """
@@ -107,6 +109,7 @@ def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events, tail_events=0.0
     import jax.numpy as jnp
     import numpy as np
 
+    import jaxcoag
     from jaxcoag import kernels as K
     from jaxcoag import mc
 
@@ -115,20 +118,22 @@ def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events, tail_events=0.0
     keys = jax.random.split(jax.random.key(seed + nu), n_arr.size)
     t_end = jnp.array([10.0 * t_estimate(300.0, nu)])  # far beyond t_R(300); runs stop at t_R
 
+    grouping = mc.Distribution(tail_events=tail_events, count_groups=count_groups,
+                               tail_wmax=wmax if tail_events > 0 else None)
+
     def one(n, k):
-        return mc.run(kern, n_particles=n, t_out=t_end, key=k, mode="const_v", grouping="distribution",
-                      ns_target=ng, f_eps=f_eps, capacity=capacity or 2 * ng, max_events=max_events,
-                      stop=mc.Runaway(1e4), tail_events=tail_events, count_groups=count_groups,
-                      tail_wmax=wmax if tail_events > 0 else None)
+        engine = jaxcoag.MonteCarlo(grouping=grouping, n_particles=n, ns_target=ng, f_eps=f_eps,
+                                    capacity=capacity or 2 * ng, max_events=max_events, stop=mc.Runaway(1e4))
+        return jaxcoag.evolve(kern, engine, jaxcoag.Monodisperse(1.0, 1.0), t_end, key=k, throw=False)
 
     # one vmapped call per N (compiled once: N is traced): a vmapped while_loop runs until its
     # slowest lane is done, so batching N = 300 with N = 1e160 would make every lane pay for 1e160
     batch = jax.jit(jax.vmap(one))
     parts = [batch(jnp.asarray(n_arr[i * runs:(i + 1) * runs]), keys[i * runs:(i + 1) * runs])
              for i in range(len(n_grid))]
-    status = np.concatenate([np.asarray(q.status) for q in parts])
-    stopped = (status & mc.STATUS.STOPPED) != 0
+    status = sum((jaxcoag.status_names(q.status) for q in parts), [])
     t_stop = np.concatenate([np.asarray(q.t_stop) for q in parts])
+    stopped = np.isfinite(t_stop)  # the Runaway stop fired (t_stop is NaN otherwise)
     t_r = np.where(stopped, t_stop, np.nan).reshape(len(n_grid), runs)
     ev = np.concatenate([np.asarray(q.n_events) for q in parts]).reshape(len(n_grid), runs)
     n_merge = np.concatenate([np.asarray(q.n_merge) for q in parts])
@@ -138,7 +143,7 @@ def runaway_times(nu, n_grid, ng, runs, f_eps, seed, max_events, tail_events=0.0
         se = np.nanstd(t_r, 1, ddof=1) / np.sqrt(n_ok)
     return dict(N=np.asarray(n_grid), t_runs=t_r, mean=mean, se=se, n_missing=runs - n_ok,
                 events=ev.max(1), events_mean=ev.mean(1), merges=n_merge.reshape(len(n_grid), runs).max(1),
-                status=np.bitwise_or.reduce(status.reshape(len(n_grid), runs), axis=1))
+                status=[sorted(set(status[i * runs:(i + 1) * runs])) for i in range(len(n_grid))])
 
 
 N_LARGE = (1e20, 1e80, 1e160)

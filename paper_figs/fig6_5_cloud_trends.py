@@ -1,9 +1,10 @@
 """Thesis ch. 6 (molecular-cloud cores) standard-model trends, T-Tab6.5/6.6, with the binned engine.
 
-What runs: ``jaxcoag.scenes.setup("ch6_cloud", n=..., material=...)`` -- a homogeneous static core
+What runs: ``jaxcoag.scenes.binned_setups.setup("ch6_cloud", n=..., material=...)`` -- a homogeneous static core
 (T = 10 K, R_gd = 100, a0 = 0.1 um monomers, Brownian + OC07 turbulence with v_L = c_g,
 t_L = L_J/c_g) -- solved with the two-bin engine for COMPACT particles (psi = 1) and the O09
-collision recipe consumed through the shared Outcome interface (jaxcoag.binned.outcome). The O09
+collision recipe through the outcome shared by both engines (``jaxcoag.outcomes.RecipeOutcome``),
+run with ``jaxcoag.evolve(kernel, jaxcoag.Binned(grid), n0, t_out, outcome=...)``. The O09
 recipe runs on the SURROGATE tables (the thesis prints only Tabs. 6.7/6.9; the
 CDS set J/A+A/502/845 is not available here), with smooth regime switches (width 0.3 e-folds).
 For n = 1e5 ice the same core is also run with perfect sticking (no fragmentation).
@@ -64,7 +65,7 @@ def diagnostics(setup, sol):
     """<a>_m [cm] and kappa [cm^2 g^-1] at every output time (compact spheres of density rho0)."""
     import numpy as np
 
-    rho = np.asarray(sol.mass_per_bin)
+    rho = np.asarray(sol.mass_per_bin())
     m = setup.grid.centers
     a = (3.0 * m / (4.0 * math.pi * setup.params["rho0"])) ** (1.0 / 3.0)
     M = rho.sum(axis=1)
@@ -74,19 +75,19 @@ def diagnostics(setup, sol):
 
 
 def run_model(n, material, outcome, bpd):
-    from jaxcoag import scenes
-    from jaxcoag.binned import RESULTS
+    import jaxcoag
+    from jaxcoag.scenes import binned_setups
     import numpy as np
 
-    s = scenes.setup("ch6_cloud", n=n, material=material, outcome=outcome, bins_per_decade=bpd, decades=16)
-    sol = s.solve(throw=False)
+    s = binned_setups.setup("ch6_cloud", n=n, material=material, outcome=outcome, bins_per_decade=bpd, decades=16)
+    sol = jaxcoag.evolve(s.kernel, jaxcoag.Binned(s.grid), s.n0, s.t_out, outcome=s.outcome, throw=False)
     a_m, kappa = diagnostics(s, sol)
-    t_yr = np.asarray(sol.ts) / YR
+    t_yr = np.asarray(sol.t) / YR
     def at(arr, t):  # value at output time t [yr]; nan if the run stopped before t (t_ad > t_end for n < 1e4)
         i = int(np.argmin(np.abs(t_yr - t)))
         return float(arr[i]) if abs(t_yr[i] - t) <= 1e-6 * t else float("nan")
     t6 = list(EPOCHS_YR) + [s.params["t_ff"] / YR, s.params["t_ad"] / YR]  # T-Tab6.5 columns
-    return dict(setup=s, sol=sol, t_yr=t_yr, a_m=a_m, kappa=kappa, ok=bool(sol.result == RESULTS.successful),
+    return dict(setup=s, sol=sol, t_yr=t_yr, a_m=a_m, kappa=kappa, ok=bool(sol.status == jaxcoag.RESULTS.successful),
                 drift=float(np.max(np.abs(np.asarray(sol.mass_drift)))),
                 a_ep=[at(a_m, t) for t in t6], k_ep=[at(kappa, t) for t in t6])
 
@@ -96,11 +97,11 @@ def main(argv=None):
     _common.enable_x64()
     import numpy as np
 
-    from jaxcoag import scenes
+    from jaxcoag.scenes import binned_setups
 
     bpd = args.bpd or 2
     checks = _common.Checks("T-Tab6.5/6.6 trends (binned, compact, O09 SURROGATE tables)")
-    std = scenes.setup("ch6_cloud")  # n = 1e5 ice: the standard model's numbers
+    std = binned_setups.setup("ch6_cloud")  # n = 1e5 ice: the standard model's numbers
     an = analytic_numbers(std)
     p = std.params
     checks.add("N1 = (E_roll/(m0 dv0^2))^7.5, dv0 = 8.3e2", an["N1"], 2.68e3, tol=5e-3)

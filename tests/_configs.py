@@ -21,3 +21,13 @@ rtol = 1e-4
 t_end_yr = 10.0
 n_out = 3
 """
+
+# The same physics with the grouped Monte Carlo engine (distribution grouping, 40 groups): a few
+# seconds, for the common-layout, resume and CLI tests of the Monte Carlo path.
+SMALL_MC = SMALL.replace('name = "small_growth"\n', 'name = "small_growth_mc"\nengine = "mc"\n') + """
+[mc]
+seed = 3
+grouping = "distribution"
+ns_target = 40
+n_particles = 1e20
+"""

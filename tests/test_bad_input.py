@@ -1,11 +1,15 @@
 """Bad input at every public entry point: a JaxcoagInputError (or the documented exception)
 raised before any work, whose message names the argument and says what to change.
 
-One parametrised case per (entry point, category): negative, zero where > 0 is needed, NaN,
-inf, wrong shape, empty / < 2-bin grids, output times not strictly increasing or negative,
-unknown names / keys, incompatible combinations (e.g. Shattering with an analytic kernel that
-has no relative velocity) and float32 mode. Each case matches a substring of the message that
-names the parameter or the fix. Everything here is cheap: no case runs a solve to the end.
+Entry points: ``jaxcoag.evolve`` and the engine objects' construction (``Binned``, ``MonteCarlo``
+and their structure classes), ``Monodisperse``, outcomes, ``steady_state``, grids, kernels, gas
+states, scenes, sweeps, fits, io, checkpoints and the CLI. One parametrised case per (entry point,
+category): negative, zero where > 0 is needed, NaN, inf, wrong shape, empty / < 2-bin grids, output
+times not strictly increasing or before t0, unknown engine objects / structure given as strings,
+a result of another engine as the initial condition, incompatible combinations (e.g. Shattering
+with an analytic kernel that has no relative velocity) and float32 mode. Each case matches a
+substring of the message that names the parameter or the fix. The refusal cases are cheap: none
+runs a solve.
 """
 
 import numpy as np
@@ -13,10 +17,13 @@ import pytest
 import jax
 import jax.numpy as jnp
 
-from jaxcoag import diagnostics, fit, io, kernels, scenes
+from jaxcoag import (RESULTS, Binned, BinnedResult, MCResult, Monodisperse, MonteCarlo, diagnostics, evolve, fit, io,
+                     kernels, mc, scenes)
 from jaxcoag._validate import JaxcoagInputError
-from jaxcoag.binned import (MassGrid, Shattering, ShatterToMonomers, exponential, monodisperse, mrn,
-                            solve_binned, steady_state)
+from jaxcoag.binned import DGScheme, MassGrid, TwoBinScheme, exponential, monodisperse, mrn, steady_state
+from jaxcoag.mc import (ConstantSpecies, Distribution, EqualMass, IncrementalRates, MassController,
+                        SpeciesController)
+from jaxcoag.outcomes import ShatterAbove, Shattering
 from jaxcoag.physics import gas as GAS
 from jaxcoag.sweep import parameter_points, sweep
 
@@ -25,6 +32,7 @@ G = MassGrid.log(10 ** (-0.5 / 4), 1e3, 4)          # 12 bins, monomer 1 g at a 
 N0 = monodisperse(G, 1.0, 1.0)
 K = kernels.Constant(1.0)
 TS = np.array([0.0, 1.0, 2.0])
+B = Binned(G)
 
 
 def _gas(**kw):
@@ -38,55 +46,83 @@ def _raises(fn, match, exc=JaxcoagInputError):
         fn()
 
 
-# ------------------------------------------------------------------------------ solve_binned
-SOLVE_CASES = {
-    # model / grid / structure
-    "model_not_kernel": (lambda: solve_binned(lambda m1, m2: 1.0, G, N0, TS), "model must be a jaxcoag kernel"),
-    "grid_not_massgrid": (lambda: solve_binned(K, np.geomspace(1, 10, 5), N0, TS), "grid must be a jaxcoag.binned.MassGrid"),
-    "unknown_scheme": (lambda: solve_binned(K, G, N0, TS, scheme="weno"), "scheme must be 'twobin', 'dg'"),
-    "twobin_order": (lambda: solve_binned(K, G, N0, TS, order=2), "use order=0"),
-    "unknown_solver": (lambda: solve_binned(K, G, N0, TS, solver="rk4"), "solver must be a diffrax solver"),
-    "fragmentation_type": (lambda: solve_binned(K, G, N0, TS, fragmentation=100.0), "fragmentation must be None"),
+def _fake_result(grid=G, ts=TS):
+    """A BinnedResult assembled by hand (no solve, no compile): the checks only read it."""
+    n = monodisperse(grid, float(grid.centers[0]), 1.0)
+    rho = jnp.tile(jnp.asarray(n * grid.centers), (ts.size, 1))
+    z = jnp.zeros(ts.size)
+    return BinnedResult(t=jnp.asarray(ts), y=jnp.concatenate([rho, z[:, None]], axis=1), rho=rho,
+                        n=jnp.tile(jnp.asarray(n), (ts.size, 1)), gel_mass=z, mass_drift=z, status=RESULTS.successful,
+                        stats={"steps": 0, "rejected": 0, "num_steps": 0}, M0=jnp.asarray(1.0), grid=grid)
+
+
+# ------------------------------------------------------------------------------ evolve + Binned
+EVOLVE_CASES = {
+    # the verb: engine / kernel / initial / key
+    "engine_string": (lambda: evolve(K, "binned", N0, TS), "engine must be a jaxcoag engine object"),
+    "engine_grid": (lambda: evolve(K, G, N0, TS), "engine must be a jaxcoag engine object"),
+    "kernel_not_kernel": (lambda: evolve(lambda m1, m2: 1.0, B, N0, TS), "kernel must be a jaxcoag kernel"),
+    "initial_other_grid": (lambda: evolve(K, B, _fake_result(MassGrid.log(1.0, 1e3, 3)), [3.0]),
+                           "BinnedResult on another grid"),
+    # engine construction: grid / scheme / solver / tolerances / steps
+    "grid_not_massgrid": (lambda: Binned((1.0, 10.0, 100.0)), "grid must be a jaxcoag.MassGrid"),
+    "scheme_string": (lambda: Binned(G, scheme="dg"), "must be a scheme object"),
+    "scheme_class": (lambda: Binned(G, scheme=TwoBinScheme), "must be a scheme object"),
+    "dg_order": (lambda: Binned(G, scheme=DGScheme(order=5)), "order"),
+    "solver_string": (lambda: Binned(G, solver="kvaerno5"), "must be a diffrax solver"),
+    "rtol_negative": (lambda: Binned(G, rtol=-1e-6), "`rtol` must be finite and > 0"),
+    "rtol_zero": (lambda: Binned(G, rtol=0.0), "`rtol` must be finite and > 0"),
+    "rtol_nan": (lambda: Binned(G, rtol=NAN), "`rtol` must be finite"),
+    "atol_negative": (lambda: Binned(G, atol=-1.0), "`atol` must be finite and > 0"),
+    "atol_inf": (lambda: Binned(G, atol=INF), "`atol` must be finite"),
+    "dt0_negative": (lambda: Binned(G, dt0=-1.0), "`dt0` must be finite and > 0"),
+    "dt0_zero": (lambda: Binned(G, dt0=0.0), "`dt0` must be finite and > 0"),
+    "max_steps_zero": (lambda: Binned(G, max_steps=0), "max_steps must be a positive int"),
+    "max_steps_float": (lambda: Binned(G, max_steps=1e5), "max_steps must be a positive int"),
+    # outcome
+    "outcome_type": (lambda: evolve(K, B, N0, TS, outcome=100.0), "has no binned form"),
     # incompatible: velocity-dependent fragmentation with an analytic kernel (no relative velocity)
-    "shattering_analytic_kernel": (lambda: solve_binned(K, G, N0, TS, fragmentation=Shattering(100.0)),
-                                   "no relative velocity"),
-    # n0
-    "n0_negative": (lambda: solve_binned(K, G, -N0, TS), "`n0` must be finite and >= 0"),
-    "n0_nan": (lambda: solve_binned(K, G, np.where(N0 > 0, NAN, 0.0), TS), "`n0` must be finite"),
-    "n0_inf": (lambda: solve_binned(K, G, np.where(N0 > 0, INF, 0.0), TS), "`n0` must be finite"),
-    "n0_wrong_shape": (lambda: solve_binned(K, G, N0[:-1], TS), r"n0 must have shape \(nbins,\) = \(12,\)"),
-    "n0_zero": (lambda: solve_binned(K, G, 0 * N0, TS), "n0 is all zeros"),
-    "n0_callable_nan": (lambda: solve_binned(K, G, lambda m: jnp.sqrt(-m), TS), r"n0\(m\) projected onto the grid gives NaN"),
-    "n0_callable_outside": (lambda: solve_binned(K, G, lambda m: 0.0 * m, TS), "holds no mass"),
-    # ts
-    "ts_not_increasing": (lambda: solve_binned(K, G, N0, np.array([0.0, 2.0, 1.0])), "ts must be strictly increasing"),
-    "ts_repeated": (lambda: solve_binned(K, G, N0, np.array([0.0, 1.0, 1.0])), "ts must be strictly increasing"),
-    "ts_single": (lambda: solve_binned(K, G, N0, np.array([0.0])), "at least 2 output times"),
-    "ts_2d": (lambda: solve_binned(K, G, N0, TS[None, :]), "1-D array"),
-    "ts_nan": (lambda: solve_binned(K, G, N0, np.array([0.0, NAN])), "`ts` must be finite"),
-    "ts_inf": (lambda: solve_binned(K, G, N0, np.array([0.0, INF])), "`ts` must be finite"),
-    # tolerances, steps
-    "rtol_negative": (lambda: solve_binned(K, G, N0, TS, rtol=-1e-6), "`rtol` must be finite and > 0"),
-    "rtol_zero": (lambda: solve_binned(K, G, N0, TS, rtol=0.0), "`rtol` must be finite and > 0"),
-    "rtol_nan": (lambda: solve_binned(K, G, N0, TS, rtol=NAN), "`rtol` must be finite"),
-    "atol_negative": (lambda: solve_binned(K, G, N0, TS, atol=-1.0), "`atol` must be finite and > 0"),
-    "atol_inf": (lambda: solve_binned(K, G, N0, TS, atol=INF), "`atol` must be finite"),
-    "dt0_negative": (lambda: solve_binned(K, G, N0, TS, dt0=-1.0), "`dt0` must be finite and > 0"),
-    "dt0_zero": (lambda: solve_binned(K, G, N0, TS, dt0=0.0), "`dt0` must be finite and > 0"),
-    "max_steps_zero": (lambda: solve_binned(K, G, N0, TS, max_steps=0), "max_steps must be a positive int"),
-    "max_steps_float": (lambda: solve_binned(K, G, N0, TS, max_steps=1e5), "max_steps must be a positive int"),
+    "shattering_analytic_kernel": (lambda: evolve(K, B, N0, TS, outcome=Shattering(100.0)), "no relative velocity"),
+    # initial condition
+    "monodisperse_m0_negative": (lambda: Monodisperse(-1.0, 1.0),
+                                 r"Monodisperse\(m0=...\) must be a finite scalar > 0"),
+    "monodisperse_rho_d_nan": (lambda: Monodisperse(1.0, NAN),
+                               r"Monodisperse\(rho_d=...\) must be a finite scalar > 0"),
+    "monodisperse_outside_grid": (lambda: evolve(K, B, Monodisperse(1e6, 1.0), TS), "outside the grid"),
+    "n0_negative": (lambda: evolve(K, B, -N0, TS), "`initial` must be finite and >= 0"),
+    "n0_nan": (lambda: evolve(K, B, np.where(N0 > 0, NAN, 0.0), TS), "`initial` must be finite"),
+    "n0_inf": (lambda: evolve(K, B, np.where(N0 > 0, INF, 0.0), TS), "`initial` must be finite"),
+    "n0_wrong_shape": (lambda: evolve(K, B, N0[:-1], TS), r"must have shape \(nbins,\) = \(12,\)"),
+    "n0_zero": (lambda: evolve(K, B, 0 * N0, TS), "initial number density is all zeros"),
+    "n0_callable_nan": (lambda: evolve(K, B, lambda m: jnp.sqrt(-m), TS), r"f\(m\) projected onto the grid gives NaN"),
+    "n0_callable_outside": (lambda: evolve(K, B, lambda m: 0.0 * m, TS), "holds no mass"),
+    # output times and t0
+    "t_out_not_increasing": (lambda: evolve(K, B, N0, np.array([0.0, 2.0, 1.0])), "t_out must be strictly increasing"),
+    "t_out_repeated": (lambda: evolve(K, B, N0, np.array([0.0, 1.0, 1.0])), "t_out must be strictly increasing"),
+    "t_out_empty": (lambda: evolve(K, B, N0, np.array([])), "non-empty 1-D array"),
+    "t_out_2d": (lambda: evolve(K, B, N0, TS[None, :]), "non-empty 1-D array"),
+    "t_out_nan": (lambda: evolve(K, B, N0, np.array([0.0, NAN])), "`t_out` must be finite"),
+    "t_out_inf": (lambda: evolve(K, B, N0, np.array([0.0, INF])), "`t_out` must be finite"),
+    "t_out_before_t0": (lambda: evolve(K, B, N0, TS, t0=0.5), r"t_out\[0\] = 0 s precedes t0 = 0.5 s"),
+    "t_out_before_continued_result": (lambda: evolve(K, B, _fake_result(), TS), r"precedes t0 = 2 s"),
+    "t0_negative": (lambda: evolve(K, B, N0, TS, t0=-1.0), "`t0` must be finite and >= 0"),
+    "t0_nan": (lambda: evolve(K, B, N0, TS, t0=NAN), "`t0` must be finite"),
+    # segments
+    "every_zero": (lambda: evolve(K, B, N0, TS, every=0), "every must be a positive int"),
+    "every_float": (lambda: evolve(K, B, N0, TS, every=1.5), "every must be a positive int"),
+    "max_segments_zero": (lambda: evolve(K, B, N0, TS, max_segments=0), "max_segments must be None or a positive int"),
 }
 
 
-@pytest.mark.parametrize("case", sorted(SOLVE_CASES))
-def test_solve_binned(case):
-    fn, match = SOLVE_CASES[case]
+@pytest.mark.parametrize("case", sorted(EVOLVE_CASES))
+def test_evolve_binned(case):
+    fn, match = EVOLVE_CASES[case]
     _raises(fn, match)
 
 
-def test_solve_binned_kernel_nan_leaf_under_jit_raises_not_nan():
+def test_evolve_kernel_nan_leaf_under_jit_raises_not_nan():
     """A NaN parameter that only appears at run time (traced) raises with the parameter's name."""
-    f = jax.jit(lambda b: solve_binned(kernels.Sum(b), G, N0, TS).mass_per_bin)
+    f = jax.jit(lambda b: evolve(kernels.Sum(b), B, N0, TS).mass_per_bin())
     assert bool(jnp.all(jnp.isfinite(f(1e-3))))
     # eqx.error_if under jax.jit surfaces as the runtime error of the compiled program: jax raises a
     # ValueError from the cached (fast-path) executable, a JaxRuntimeError on a first dispatch
@@ -94,23 +130,31 @@ def test_solve_binned_kernel_nan_leaf_under_jit_raises_not_nan():
         jax.block_until_ready(f(NAN))
 
 
+def test_binned_ignores_a_key():
+    """One call runs any engine: the deterministic binned engine ignores key= (bit-identical result)."""
+    a = evolve(K, B, N0, TS)
+    b = evolve(K, B, N0, TS, key=jax.random.key(0))
+    np.testing.assert_array_equal(np.asarray(a.rho), np.asarray(b.rho))
+    # constant kernel, monodisperse start: N(t) = N0 / (1 + K N0 t / 2) (Smoluchowski 1916), N0 = 1
+    np.testing.assert_allclose(np.asarray(a.n).sum(axis=1), 1.0 / (1.0 + TS / 2.0), rtol=1e-5)
+
+
 # ------------------------------------------------------------------------------ steady_state
+SF = ShatterAbove(10.0, 1.0)
 STEADY_CASES = {
-    "no_fragmentation": (lambda: steady_state(K, G, N0, fragmentation=None, t_relax=1.0), "needs a fragmentation model"),
-    "no_t_relax_no_guess": (lambda: steady_state(K, G, N0, fragmentation=ShatterToMonomers(10.0)),
-                            "needs t_relax"),
-    "t_relax_negative": (lambda: steady_state(K, G, N0, fragmentation=ShatterToMonomers(10.0), t_relax=-1.0),
-                         "`t_relax` must be finite and > 0"),
-    "t_relax_nan": (lambda: steady_state(K, G, N0, fragmentation=ShatterToMonomers(10.0), t_relax=NAN),
-                    "`t_relax` must be finite"),
-    "newton_rtol_zero": (lambda: steady_state(K, G, N0, fragmentation=ShatterToMonomers(10.0), t_relax=1.0,
-                                              newton_rtol=0.0), "`newton_rtol` must be finite and > 0"),
-    "newton_steps_zero": (lambda: steady_state(K, G, N0, fragmentation=ShatterToMonomers(10.0), t_relax=1.0,
-                                               newton_steps=0), "newton_steps must be a positive int"),
-    "y_guess_wrong_shape": (lambda: steady_state(K, G, N0, fragmentation=ShatterToMonomers(10.0),
-                                                 y_guess=np.ones(3)), "y_guess must have shape"),
-    "y_guess_nan": (lambda: steady_state(K, G, N0, fragmentation=ShatterToMonomers(10.0),
-                                         y_guess=np.full(G.nbins + 1, NAN)), "`y_guess` must be finite"),
+    "engine_not_binned": (lambda: steady_state(K, "binned", N0, outcome=SF, t_relax=1.0),
+                          "needs a jaxcoag.Binned engine"),
+    "no_fragmentation": (lambda: steady_state(K, B, N0, outcome=None, t_relax=1.0), "needs a fragmenting outcome"),
+    "no_t_relax_no_guess": (lambda: steady_state(K, B, N0, outcome=SF), "needs t_relax"),
+    "t_relax_negative": (lambda: steady_state(K, B, N0, outcome=SF, t_relax=-1.0), "`t_relax` must be finite and > 0"),
+    "t_relax_nan": (lambda: steady_state(K, B, N0, outcome=SF, t_relax=NAN), "`t_relax` must be finite"),
+    "newton_rtol_zero": (lambda: steady_state(K, B, N0, outcome=SF, t_relax=1.0, newton_rtol=0.0),
+                         "`newton_rtol` must be finite and > 0"),
+    "newton_steps_zero": (lambda: steady_state(K, B, N0, outcome=SF, t_relax=1.0, newton_steps=0),
+                          "newton_steps must be a positive int"),
+    "y_guess_wrong_shape": (lambda: steady_state(K, B, N0, outcome=SF, y_guess=np.ones(3)), "y_guess must have shape"),
+    "y_guess_nan": (lambda: steady_state(K, B, N0, outcome=SF, y_guess=np.full(G.nbins + 1, NAN)),
+                    "`y_guess` must be finite"),
 }
 
 
@@ -235,51 +279,112 @@ def test_fragmentation_models():
     _raises(lambda: Shattering(-1.0), "`v_frag` must be finite and > 0")
     _raises(lambda: Shattering(NAN), "`v_frag` must be finite and > 0")
     _raises(lambda: Shattering(100.0, probability="gaussian"), "probability must be one of")
-    _raises(lambda: ShatterToMonomers(-1.0), "m_frag")
+    _raises(lambda: ShatterAbove(-1.0, 1.0), "`m_frag` must be finite and > 0")
+    _raises(lambda: ShatterAbove(10.0, NAN), "`m_mono` must be finite and > 0")
+    _raises(lambda: Shattering(100.0, crater_ratio=1.0), "crater_ratio must be > 1")
+    _raises(lambda: Shattering(100.0, chi=9.5), r"chi must lie in \(0, crater_ratio - 1\)")
 
 
 # ------------------------------------------------------------------------------ Monte Carlo
+def _mc(engine=None, initial=None, t_out=(0.5, 1.0), kernel=K, **kw):
+    """evolve with the MonteCarlo engine (default: 100 monomers of 1 g, key 0), arguments overridden by kw."""
+    args = dict(key=jax.random.key(0))
+    args.update(kw)
+    engine = MonteCarlo(n_particles=100) if engine is None else engine
+    initial = Monodisperse(1.0, 1.0) if initial is None else initial
+    return evolve(kernel, engine, initial, t_out, **args)
+
+
+def _fake_mc_result():
+    """An MCResult assembled by hand (T = 1 output, S = 2 slots; no run): a result of another engine."""
+    one, two = jnp.ones((1,)), jnp.ones((1, 2))
+    return MCResult(t=one, m=two, logm=0 * two, psi=jnp.ones((1, 2, 0)), w=two, z=jnp.zeros((1, 2), jnp.int32),
+                    valid=jnp.ones((1, 2), bool), V=one, logV=0 * one, M_tot=2 * one, n_events_snap=jnp.zeros(1),
+                    status=RESULTS.successful, flags=jnp.int32(0), n_events=jnp.int32(0), n_dup=jnp.int32(0),
+                    n_merge=jnp.int32(0))
+
+
 MC_CASES = {
-    "kernel_not_kernel": (dict(kernel=1.0), "`kernel` must be a jaxcoag.kernels.AbstractKernel"),
-    "n_particles_negative": (dict(n_particles=-10), "`n_particles` must be finite and > 0"),
-    "n_particles_nan": (dict(n_particles=NAN), "`n_particles` must be finite"),
-    "m0_zero": (dict(m0=0.0), "`m0` must be finite and > 0"),
-    "rho_d_inf": (dict(rho_d=INF), "`rho_d` must be finite"),
-    "f_eps_negative": (dict(f_eps=-1e-3), "`f_eps` must be finite and > 0"),
-    "t_out_not_increasing": (dict(t_out=[1.0, 0.5]), "strictly increasing"),
-    "t_out_negative": (dict(t_out=[-1.0, 1.0]), "`t_out` must be finite and >= 0"),
-    "t_out_nan": (dict(t_out=[0.0, NAN]), "`t_out` must be finite"),
-    "t_out_empty": (dict(t_out=[]), "non-empty 1-D array"),
-    "t_out_2d": (dict(t_out=[[1.0]]), "non-empty 1-D array"),
-    "unknown_mode": (dict(mode="const_m"), "unknown mode 'const_m'"),
-    "unknown_grouping": (dict(grouping="equal_number"), "unknown grouping"),
-    "unknown_rates": (dict(rates="lazy"), "unknown rates"),
-    "too_many_particles": (dict(n_particles=1e20), "grouping=None needs n_particles <= 2"),
-    "outcome_type": (dict(outcome="sticking"), "`outcome` must be a jaxcoag.mc.AbstractOutcome"),
-    "capacity_not_int": (dict(capacity=10.5), "`capacity` must be an integer >= 1"),
-    "n_bins_zero": (dict(grouping="distribution", n_bins=0), "`n_bins` must be >= 1"),
-    "key_not_key": (dict(key=3), "`key` must be a jax.random key"),
-    "p_protect_negative": (dict(p_protect=-1), "`p_protect` must be >= 0"),
-    "n_refresh_zero": (dict(n_refresh=0), "`n_refresh` must be >= 1"),
-    "n_rezoom_zero": (dict(grouping="distribution", n_rezoom=0), "`n_rezoom` must be >= 1"),
-    "d_max_zero": (dict(mode="const_ns", d_max=0), "`d_max` must be >= 1"),
-    "tail_events_negative": (dict(grouping="distribution", tail_events=-1.0), "`tail_events` must be a finite number >= 0"),
-    "tail_events_without_distribution": (dict(tail_events=8.0), "only applies to grouping='distribution'"),
-    "count_groups_zero": (dict(grouping="distribution", count_groups=0.0), "`count_groups` must be a finite number >= 1"),
-    "count_groups_nan": (dict(grouping="distribution", count_groups=float("nan")), "`count_groups` must be a finite"),
-    "count_groups_without_distribution": (dict(grouping="equal_mass", count_groups=10), "`count_groups` only applies"),
-    "tail_wmax_small": (dict(grouping="distribution", tail_wmax=0.5), "`tail_wmax` must be a finite number >= 1"),
+    # the engine's fields (refused at construction)
+    "n_particles_negative": (lambda: MonteCarlo(n_particles=-10),
+                             r"MonteCarlo\(n_particles=...\) must be a finite number > 0"),
+    "n_particles_nan": (lambda: MonteCarlo(n_particles=NAN), r"MonteCarlo\(n_particles=...\) must be a finite number"),
+    "ns_target_zero": (lambda: MonteCarlo(ns_target=0), r"MonteCarlo\(ns_target=...\) must be a finite number > 0"),
+    "f_eps_negative": (lambda: MonteCarlo(f_eps=-1e-3), r"MonteCarlo\(f_eps=...\) must be a finite number > 0"),
+    "capacity_not_int": (lambda: MonteCarlo(capacity=10.5), r"MonteCarlo\(capacity=...\) must be an integer >= 1"),
+    "max_events_zero": (lambda: MonteCarlo(max_events=0), r"MonteCarlo\(max_events=...\) must be >= 1"),
+    "p_protect_negative": (lambda: MonteCarlo(p_protect=-1), r"MonteCarlo\(p_protect=...\) must be >= 0"),
+    "grouping_string": (lambda: MonteCarlo(grouping="equal_mass"), r"MonteCarlo\(grouping=...\) must be None"),
+    "grouping_class": (lambda: MonteCarlo(grouping=EqualMass), r"MonteCarlo\(grouping=...\) must be None"),
+    "volume_string": (lambda: MonteCarlo(volume="const_m"),
+                      r"MonteCarlo\(volume=...\) must be jaxcoag.mc.ConstantVolume"),
+    "rates_string": (lambda: MonteCarlo(rates="lazy"), r"MonteCarlo\(rates=...\) must be jaxcoag.mc.IncrementalRates"),
+    "neps_rounding_unknown": (lambda: MonteCarlo(neps_rounding="round"),
+                              r"MonteCarlo\(neps_rounding='round'\) is unknown"),
+    "leftover_unknown": (lambda: MonteCarlo(leftover="keep"), r"MonteCarlo\(leftover='keep'\) is unknown"),
+    "merge_weighting_unknown": (lambda: MonteCarlo(merge_weighting="area"), "merge_weighting='area'\\) is unknown"),
+    "dedupe_not_bool": (lambda: MonteCarlo(dedupe="yes"), r"MonteCarlo\(dedupe=...\) must be True or False"),
+    "stop_not_callable": (lambda: MonteCarlo(stop=1e4), r"MonteCarlo\(stop=...\) must be a jaxcoag.mc.AbstractStop"),
+    "struct0_nan": (lambda: MonteCarlo(struct0=jnp.array([NAN])),
+                    r"MonteCarlo\(struct0=...\) must be a finite 1-D vector"),
+    # the structure classes
+    "n_bins_zero": (lambda: Distribution(n_bins=0), r"Distribution\(n_bins=...\) must be >= 1"),
+    "n_rezoom_zero": (lambda: Distribution(n_rezoom=0), r"Distribution\(n_rezoom=...\) must be >= 1"),
+    "m_lo_zero": (lambda: Distribution(m_lo=0.0), r"Distribution\(m_lo=...\) must be a finite number > 0"),
+    "tail_events_negative": (lambda: Distribution(tail_events=-1.0),
+                             r"Distribution\(tail_events=...\) must be a finite number >= 0"),
+    "count_groups_zero": (lambda: Distribution(count_groups=0.0),
+                          r"Distribution\(count_groups=...\) must be a finite number >= 1"),
+    "count_groups_nan": (lambda: Distribution(count_groups=NAN), r"Distribution\(count_groups=...\) must be a finite"),
+    "tail_wmax_small": (lambda: Distribution(tail_wmax=0.5),
+                        r"Distribution\(tail_wmax=...\) must be a finite number >= 1"),
+    "controller_string": (lambda: ConstantSpecies(controller="mass"), r"ConstantSpecies\(controller=...\) must be"),
+    "d_max_zero": (lambda: MassController(d_max=0), r"MassController\(d_max=...\) must be >= 1"),
+    "d_up_float": (lambda: SpeciesController(d_up=1.5), r"SpeciesController\(d_up=...\) must be an integer >= 1"),
+    "n_refresh_zero": (lambda: IncrementalRates(n_refresh=0), r"IncrementalRates\(n_refresh=...\) must be >= 1"),
+    # evolve: kernel, outcome, key, initial condition, output times
+    "kernel_not_kernel": (lambda: _mc(kernel=1.0), "kernel must be a jaxcoag.kernels.AbstractKernel"),
+    "outcome_type": (lambda: _mc(outcome="sticking"), "outcome must be a collision outcome from jaxcoag.outcomes"),
+    "key_not_key": (lambda: _mc(key=3), "key must be a jax.random key"),
+    "key_missing": (lambda: _mc(key=None), "give key=, a jax.random key"),
+    "m0_zero": (lambda: _mc(initial=Monodisperse(0.0, 1.0)), r"Monodisperse\(m0=...\) must be a finite scalar > 0"),
+    "rho_d_inf": (lambda: _mc(initial=Monodisperse(1.0, INF)), r"Monodisperse\(rho_d=...\) must be a finite scalar"),
+    "monodisperse_without_n_particles": (lambda: _mc(engine=MonteCarlo()),
+                                         "a Monodisperse start needs MonteCarlo\\(n_particles"),
+    "too_many_particles": (lambda: _mc(engine=MonteCarlo(n_particles=1e20)),
+                           r"grouping=None needs n_particles <= 2\^53"),
+    "mass_beyond_float64": (lambda: _mc(engine=MonteCarlo(n_particles=1e200, grouping=EqualMass()),
+                                        initial=Monodisperse(1e120)),
+                            "n_particles \\* m0 must stay below 1e300 g"),
+    "species_with_n_particles": (lambda: _mc(initial=mc.initial_species(jnp.array([1.0, 2.0]),
+                                                                        g=jnp.array([3.0, 4.0]))),
+                                 "initial_species\\(...\\) gives its own multiplicities: drop n_particles"),
+    "initial_number_array": (lambda: _mc(initial=N0), "initial must be jaxcoag.Monodisperse"),
+    "capacity_too_small": (lambda: _mc(engine=MonteCarlo(n_particles=100, capacity=3)),
+                           r"MonteCarlo\(capacity=3\) is too small"),
+    "t_out_not_increasing": (lambda: _mc(t_out=[1.0, 0.5]), "t_out must be strictly increasing"),
+    "t_out_negative": (lambda: _mc(t_out=[-1.0, 1.0]), r"t_out\[0\] = -1 s precedes t0 = 0 s"),
+    "t_out_nan": (lambda: _mc(t_out=[0.0, NAN]), "`t_out` must be finite"),
+    "t_out_empty": (lambda: _mc(t_out=[]), "non-empty 1-D array"),
+    "t_out_2d": (lambda: _mc(t_out=[[1.0]]), "non-empty 1-D array"),
+    # a result of another engine as the initial condition (both directions), a hand-made one
+    "binned_result_to_mc": (lambda: _mc(initial=_fake_result(), t_out=[3.0]),
+                            "initial is a BinnedResult: a MonteCarlo run continues only an MCResult"),
+    "mc_result_to_binned": (lambda: evolve(K, B, _fake_mc_result(), [2.0]),
+                            "initial is a MCResult: a Binned run continues only a BinnedResult"),
+    "mc_result_without_final_state": (lambda: _mc(initial=_fake_mc_result(), t_out=[2.0]),
+                                      "MCResult without final_state"),
+    # steady_state is a binned-engine tool
+    "steady_state_mc": (lambda: steady_state(K, MonteCarlo(n_particles=100), Monodisperse(1.0), outcome=SF,
+                                             t_relax=1.0),
+                        "steady_state needs a jaxcoag.Binned engine; got MonteCarlo"),
 }
 
 
 @pytest.mark.parametrize("case", sorted(MC_CASES))
-def test_mc_run(case):
-    from jaxcoag import mc
-
-    kw, match = MC_CASES[case]
-    args = dict(kernel=K, n_particles=100, t_out=[0.5, 1.0], key=jax.random.key(0))
-    args.update(kw)
-    _raises(lambda: mc.run(args.pop("kernel"), **args), match)
+def test_monte_carlo(case):
+    fn, match = MC_CASES[case]
+    _raises(fn, match)
 
 
 # ------------------------------------------------------------------------------ sweeps
@@ -372,27 +477,16 @@ def test_fit_entry_points(small_box):
 
 
 # ------------------------------------------------------------------------------ io and diagnostics
-def _fake_solution():
-    """A BinnedSolution assembled by hand (no solve, no compile): the io checks only read it."""
-    from jaxcoag.binned import RESULTS, BinnedSolution
-
-    rho = jnp.tile(jnp.asarray(N0 * G.centers), (TS.size, 1))
-    z = jnp.zeros(TS.size)
-    return BinnedSolution(ts=jnp.asarray(TS), ys=jnp.concatenate([rho, z[:, None]], axis=1), mass_per_bin=rho,
-                          number_per_bin=jnp.tile(jnp.asarray(N0), (TS.size, 1)), gel_mass=z, mass_drift=z,
-                          result=RESULTS.successful, stats={"steps": 0, "rejected": 0, "num_steps": 0}, grid=G)
-
-
 def test_io(tmp_path):
-    sol = _fake_solution()
-    assert float(io.to_xarray(sol)["mass_per_bin"].sum()) == pytest.approx(TS.size * 1.0)
-    _raises(lambda: io.to_xarray({"mass_per_bin": 1}), "needs a jaxcoag.binned.BinnedSolution")
-    _raises(lambda: io.to_xarray(sol, attrs=[1]), "attrs must be a dict")
-    _raises(lambda: io.to_xarray(sol, attrs={1: "x"}), "attrs keys must be strings")
-    _raises(lambda: io.save_netcdf(sol, tmp_path / "missing" / "x.nc"), "does not exist; create it first")
-    _raises(lambda: io.save_netcdf(io.to_xarray(sol), tmp_path / "x.nc", attrs={"a": 1}), "attrs is only used")
-    _raises(lambda: io.save_netcdf(sol, tmp_path), "is a directory")
-    _raises(lambda: io.save_netcdf([1, 2], tmp_path / "x.nc"), "BinnedSolution")
+    res = _fake_result()
+    assert float(res.to_xarray()["mass_per_bin"].sum()) == pytest.approx(TS.size * 1.0)
+    _raises(lambda: res.to_xarray(attrs=[1]), "attrs must be a dict")
+    _raises(lambda: res.to_xarray(attrs={1: "x"}), "attrs keys must be strings")
+    _raises(lambda: res.to_xarray(edges=[1.0, 0.5, 2.0]), "edges must be a 1-D, positive, strictly increasing")
+    _raises(lambda: io.save_netcdf(res, tmp_path / "missing" / "x.nc"), "does not exist; create it first")
+    _raises(lambda: io.save_netcdf(res.to_xarray(), tmp_path / "x.nc", attrs={"a": 1}), "is only for saving a result")
+    _raises(lambda: io.save_netcdf(res, tmp_path), "is a directory")
+    _raises(lambda: io.save_netcdf([1, 2], tmp_path / "x.nc"), "result with .to_xarray()")
     _raises(lambda: io.load_netcdf(tmp_path / "nope.nc"), "no netCDF file", FileNotFoundError)
     assert not any(p.name.endswith(".tmp") for p in tmp_path.iterdir())
 
@@ -408,11 +502,10 @@ def test_float32_mode_is_refused():
     """With x64 off every engine entry point refuses with the switch to turn it on."""
     jax.config.update("jax_enable_x64", False)
     try:
-        _raises(lambda: solve_binned(K, G, N0, TS), "jax_enable_x64")
+        _raises(lambda: evolve(K, B, N0, TS), "jax_enable_x64")
         _raises(lambda: sweep(_f, {"a": [1.0]}), "jax_enable_x64")
         _raises(lambda: fit.nebula_box(), "jax_enable_x64")
-        from jaxcoag import mc
-        _raises(lambda: mc.run(K, n_particles=10, t_out=[1.0], key=jax.random.key(0)), "JAX_ENABLE_X64=1")
+        _raises(lambda: _mc(), "jax_enable_x64")
     finally:
         jax.config.update("jax_enable_x64", True)
     assert jnp.asarray(1.0).dtype == jnp.float64
@@ -421,10 +514,10 @@ def test_float32_mode_is_refused():
 def test_incompatible_kernel_error_is_also_a_type_error():
     """Shattering with an analytic kernel: a JaxcoagInputError that is also a TypeError (older
     callers catch TypeError), raised before any compilation."""
-    with pytest.raises(TypeError, match="ShatterToMonomers"):
-        solve_binned(kernels.Sum(1.0), G, N0, TS, fragmentation=Shattering(100.0))
+    with pytest.raises(TypeError, match="ShatterAbove"):
+        evolve(kernels.Sum(1.0), B, N0, TS, outcome=Shattering(100.0))
     with pytest.raises(JaxcoagInputError, match="Scene"):
-        steady_state(K, G, N0, fragmentation=Shattering(100.0), y_guess=np.ones(G.nbins + 1))
+        steady_state(K, B, N0, outcome=Shattering(100.0), y_guess=np.ones(G.nbins + 1))
 
 
 # ------------------------------------------------------------------------------ refused before the work
@@ -450,13 +543,17 @@ def _files(root):
     return out
 
 
+_BINNED_ADVANCE = Binned._advance  # the real one, for building a valid checkpoint under no_compute
+
+
 @pytest.fixture
 def no_compute(monkeypatch):
-    """Make any segment integration fail loudly: a refusal must come before the computation."""
+    """Make every engine's advance fail loudly: a refusal must come before the computation."""
     def boom(*a, **k):
         raise AssertionError("the run started computing before refusing")
 
-    monkeypatch.setattr(ckmod, "integrate", boom)
+    monkeypatch.setattr(Binned, "_advance", boom)
+    monkeypatch.setattr(MonteCarlo, "_advance", boom)
 
 
 def _refused(capsys, argv, *words):
@@ -526,12 +623,12 @@ def test_memory_estimate_limit_and_suggested_bins(monkeypatch):
 
 
 def test_grid_too_large_python_api_refused_fast(monkeypatch):
-    """solve_binned / steady_state / MassGrid refuse an oversized grid up front (no compile, no tensors)."""
+    """evolve(Binned) / steady_state / MassGrid refuse an oversized grid up front (no compile, no tensors)."""
     monkeypatch.setenv("JAXCOAG_MEMORY_LIMIT_GB", "0.5")
     g = MassGrid.log(1.0, 1e4, 1000)  # 4000 bins: ~3.7 GiB of two-bin pair tensors (explicit)
     t0 = time.perf_counter()
-    _raises(lambda: solve_binned(K, g, monodisperse(g, 1.5, 1.0), TS), "use a coarser grid")
-    _raises(lambda: steady_state(K, g, monodisperse(g, 1.5, 1.0), fragmentation=ShatterToMonomers(10.0),
+    _raises(lambda: evolve(K, Binned(g), Monodisperse(1.5, 1.0), TS), "use a coarser grid")
+    _raises(lambda: steady_state(K, Binned(g), Monodisperse(1.5, 1.0), outcome=ShatterAbove(10.0, 1.5),
                                  t_relax=1.0), "use a coarser grid")
     _raises(lambda: MassGrid.log(1.0, 1e4, 1e8), "whose grid arrays alone need")
     assert time.perf_counter() - t0 < 3.0
@@ -573,26 +670,32 @@ def test_read_only_directory_refused(tmp_path, capsys, no_compute):
         ro.chmod(0o755)
 
 
-def _good_checkpoint(tmp_path, name="ck.npz", **over):
-    """A valid binned checkpoint of SMALL_TOML at segment 0 (written with save_checkpoint, no solve)."""
-    cfg = config.loads(SMALL_TOML)
+def _good_checkpoint(tmp_path, name="ck.npz", cfg=None):
+    """A valid checkpoint of SMALL_TOML (or ``cfg``) after its first output time, as `jaxcoag run` would
+    write it: that run's fingerprint, its initial state and zero outputs of the engine's structure (no
+    solve). Returns (cfg, built, path, fingerprint, state, outs)."""
+    cfg = config.loads(SMALL_TOML) if cfg is None else cfg
     b = config.build(cfg)
-    y0 = np.asarray(b.scheme.init(b.grid, jnp.asarray(b.n0)))
-    kw = dict(config_hash=cfg.physics_hash(), ts=b.ts, ys=y0[None, :], steps=[], rejected=[], wall_s=[])
-    kw.update(over)
+    t_out = np.asarray(b.t_out, np.float64)
+    fp = ckmod.run_fingerprint(b.kernel, b.engine, b.initial, t_out, t0=0.0, outcome=b.outcome, key=b.key)
+    state = b.engine._init(b.kernel, b.initial, 0.0, b.outcome, b.key)
+    like = jax.eval_shape(lambda st: _BINNED_ADVANCE(b.engine, b.kernel, st, jnp.asarray(t_out[:1]), b.outcome)[1],
+                          state)
+    outs = jax.tree_util.tree_map(lambda x: np.zeros(x.shape, x.dtype), like)
+    outs["y"] = np.asarray(state["y"])[None, :]
     path = tmp_path / name
-    ckmod.save_checkpoint(path, **kw)
-    return cfg, b, path
+    ckmod.save(path, fingerprint=fp, state=state, outs=outs, meta={"every": 1, "n_out": t_out.size})
+    return cfg, b, path, fp, state, outs
 
 
 @pytest.mark.parametrize("kind", ["truncated", "random_bytes", "other_configuration", "nan_state", "empty_file",
                                   "foreign_npz"])
 def test_bad_checkpoint_refused_naming_the_file(tmp_path, capsys, no_compute, kind):
-    cfg, b, good = _good_checkpoint(tmp_path, "good.npz")
-    # the valid one is accepted (numbers as written)
-    ck = ckmod.load_checkpoint(good, config_hash=cfg.physics_hash(), ts=b.ts, ny=b.grid.nbins + 1)
-    assert ck["ys"].shape == (1, b.grid.nbins + 1) and ck["steps"].size == 0
-    np.testing.assert_allclose(ck["ys"][0].sum(), 0.01 * float(b.gas.rho_g), rtol=1e-12)
+    cfg, b, good, fp, state, outs = _good_checkpoint(tmp_path, "good.npz")
+    # the valid one is accepted (numbers as written): one output done, the initial dust density 0.01 rho_g
+    ck = ckmod.load(good, fingerprint=fp, like_state=state, like_outs=outs)
+    assert ck["n_done"] == 1 and ck["outs"]["y"].shape == (1, b.grid.nbins + 1)
+    np.testing.assert_allclose(float(ck["state"]["y"].sum()), 0.01 * float(b.gas.rho_g), rtol=1e-12)
     bad = tmp_path / "bad.npz"
     raw = good.read_bytes()
     if kind == "truncated":
@@ -606,18 +709,20 @@ def test_bad_checkpoint_refused_naming_the_file(tmp_path, capsys, no_compute, ki
         words = ("is truncated or not a jaxcoag checkpoint", "delete it")
     elif kind == "foreign_npz":
         np.savez(bad, a=np.arange(3))
-        words = ("is not a jaxcoag-binned-checkpoint", "delete it")
+        words = ("is not a jaxcoag-checkpoint-v2 file", "delete it")
     elif kind == "other_configuration":
-        other = cfg.replace(**{"gas.alpha": 1e-4})
-        _good_checkpoint(tmp_path, "bad.npz", config_hash=other.physics_hash())
+        _good_checkpoint(tmp_path, "bad.npz", cfg=cfg.replace(**{"gas.alpha": 1e-4}))
         words = ("different run configuration", "without --resume")
-    else:
-        ys = np.asarray(ck["ys"]).copy()
-        ys[0, 0] = np.nan
-        _good_checkpoint(tmp_path, "bad.npz", ys=ys)
-        words = ("NaN", "delete it")
+    else:  # a NaN where the run wrote a finite number (the state's bin masses)
+        d = dict(np.load(good))
+        i_y = [str(q) for q in d["paths"]].index("state['y']")
+        leaf = f"leaf_{i_y:05d}"
+        d[leaf] = d[leaf].copy()
+        d[leaf][0] = np.nan
+        np.savez(bad, **d)
+        words = ("NaN", "state['y']", "delete it")
     with pytest.raises(JaxcoagInputError, match="bad.npz") as e:
-        ckmod.load_checkpoint(bad, config_hash=cfg.physics_hash(), ts=b.ts, ny=b.grid.nbins + 1)
+        ckmod.load(bad, fingerprint=fp, like_state=state, like_outs=outs)
     for w in words:
         assert w in str(e.value), str(e.value)
     content = bad.read_bytes()
@@ -627,6 +732,10 @@ def test_bad_checkpoint_refused_naming_the_file(tmp_path, capsys, no_compute, ki
                             "--out", str(tmp_path / "o" / "run.nc")], str(bad), *words)
     assert msg.startswith("jaxcoag run: error:")
     assert _files(tmp_path) == before and bad.read_bytes() == content  # nothing written, checkpoint untouched
+    # the good one passes every check of `jaxcoag run --resume`: the run gets as far as computing
+    with pytest.raises(AssertionError, match="started computing"):
+        cli.main(["run", path, "--no-progress", "--resume", "--checkpoint", str(good),
+                  "--out", str(tmp_path / "o" / "run.nc")])
 
 
 def _write_small(tmp_path):
@@ -645,8 +754,8 @@ def test_save_false_writes_nothing(tmp_path, monkeypatch):
     res = runner.run(cfg, out=out, save=False, progress=False, verbose=False, figure=True)
     assert _files(tmp_path) == set()
     assert res.finished and res.path is None and res.figure is None and res.checkpoint is None
-    rho = np.asarray(res.solution.mass_per_bin)
-    assert rho.shape == (4, 11) and np.max(np.abs(np.asarray(res.solution.mass_drift))) < 1e-12
+    rho = np.asarray(res.result.mass_per_bin())
+    assert rho.shape == (4, 11) and np.max(np.abs(np.asarray(res.result.mass_drift))) < 1e-12
     # the same config with a checkpoint of 1 of 3 segments: resume reads it, writes nothing
     part = runner.run(cfg, out=out, progress=False, verbose=False, figure=False, max_segments=1)
     ck = tmp_path / "sub" / "run.nc.ckpt.npz"
@@ -655,47 +764,52 @@ def test_save_false_writes_nothing(tmp_path, monkeypatch):
     res2 = runner.run(cfg, out=out, save=False, resume=True, progress=False, verbose=False)
     assert res2.resumed_from == 1 and res2.finished
     assert ck.read_bytes() == raw and _files(tmp_path) == listing
-    np.testing.assert_array_equal(np.asarray(res2.solution.mass_per_bin), rho)
+    np.testing.assert_array_equal(np.asarray(res2.result.mass_per_bin()), rho)
 
 
 # ------------------------------------------------------------------------------ Monte Carlo checkpoints / capacity
 def test_mc_bad_checkpoint_refused_naming_the_file(tmp_path):
-    from jaxcoag import mc
-
+    """evolve(MonteCarlo, checkpoint=...) refuses a damaged file or one of another run, naming the file
+    and what to do, before running, and leaves the file as it was."""
     # the configuration of test_mc_capacity_exhaustion_is_reported_not_silent (one compilation)
-    kw = dict(n_particles=2, capacity=24, dedupe=False, key=jax.random.key(4), progress=False, every=4)
+    engine = MonteCarlo(n_particles=2, capacity=24, dedupe=False)
     t_out = jnp.array([0.0, 0.5, 2.0, 50.0])
+    kw = dict(key=jax.random.key(4), every=4)
     good = tmp_path / "mc.npz"
-    res = mc.run_checkpointed(K, t_out=t_out, checkpoint=good, **kw)
-    ck = mc.load_checkpoint(good)
+    res = _mc(engine=engine, t_out=t_out, checkpoint=good, **kw)
+    state0 = engine._init(K, Monodisperse(1.0, 1.0), 0.0, None, kw["key"])
+    like_outs = jax.eval_shape(lambda st: engine._advance(K, st, t_out, None)[1], state0)
+    ck = ckmod.load(good, fingerprint=None, like_state=state0, like_outs=like_outs)
     # two monomers coalesce once (P(no event by t = 50) = e^-25): one particle of mass 2 remains
     assert ck["n_done"] == 4 and int(ck["state"].n_events) == int(res.n_events) == 1
     np.testing.assert_allclose(float(np.sum(np.asarray(ck["state"].w) * np.asarray(ck["state"].m))), 2.0)
     raw = good.read_bytes()
-    d = dict(np.load(good))
-    d["state_w"] = d["state_w"].copy()
-    d["state_w"][0] = np.nan
-    cases = {"truncated": (raw[: len(raw) // 3], "is truncated or not a jaxcoag.mc checkpoint"),
-             "random": (np.random.default_rng(3).bytes(2048), "is truncated or not a jaxcoag.mc checkpoint"),
-             "empty": (b"", "is truncated or not a jaxcoag.mc checkpoint")}
-    for name, (content, words) in cases.items():
+    cases = {"truncated": raw[: len(raw) // 3], "random": np.random.default_rng(3).bytes(2048), "empty": b""}
+    for name, content in cases.items():
         p = tmp_path / f"{name}.npz"
         p.write_bytes(content)
         with pytest.raises(JaxcoagInputError, match=f"{name}.npz") as e:
-            mc.load_checkpoint(p)
-        assert words in str(e.value) and "delete it or use resume=False" in str(e.value)
-        # run_checkpointed(resume=True) refuses it before running and leaves it as it was
+            ckmod.read_info(p)
+        assert "is truncated or not a jaxcoag checkpoint" in str(e.value)
+        assert "delete it or start afresh" in str(e.value)
+        # evolve(resume=True) refuses it before running and leaves it as it was
         with pytest.raises(JaxcoagInputError, match=f"{name}.npz"):
-            mc.run_checkpointed(K, t_out=t_out, checkpoint=p, resume=True, **kw)
+            _mc(engine=engine, t_out=t_out, checkpoint=p, resume=True, **kw)
         assert p.read_bytes() == content
+    d = dict(np.load(good))
+    leaf = f"leaf_{[str(q) for q in d['paths']].index('state.w'):05d}"
+    d[leaf] = d[leaf].copy()
+    d[leaf][0] = np.nan  # the species weights were finite when written
     nanp = tmp_path / "nan.npz"
     np.savez(nanp, **d)
-    _raises(lambda: mc.load_checkpoint(nanp), r"holds NaN in \['state_w'\]")
+    _raises(lambda: ckmod.read_info(nanp), r"nan.npz holds NaN/inf in \['state.w'\] where the run wrote finite numbers")
     np.savez(tmp_path / "foreign.npz", a=np.arange(3))
-    _raises(lambda: mc.load_checkpoint(tmp_path / "foreign.npz"), "is not a jaxcoag.mc checkpoint")
-    # another configuration: refused by the argument fingerprint
-    _raises(lambda: mc.run_checkpointed(K, t_out=t_out, checkpoint=good, resume=True,
-                                        **dict(kw, n_particles=3)), "different arguments")
+    _raises(lambda: ckmod.read_info(tmp_path / "foreign.npz"), "is not a jaxcoag-checkpoint-v2 file")
+    # another configuration (or another key): refused by the run fingerprint
+    for other in (dict(engine=MonteCarlo(n_particles=3, capacity=24, dedupe=False)), dict(key=jax.random.key(5))):
+        _raises(lambda: _mc(**dict(dict(engine=engine, t_out=t_out, checkpoint=good, resume=True, **kw), **other)),
+                "was written by a different run configuration")
+    assert good.read_bytes() == raw
 
 
 def test_mc_capacity_below_the_target_refused():
@@ -703,27 +817,29 @@ def test_mc_capacity_below_the_target_refused():
     needs S >= 20 (S = 19: min(floor(17.1), 19 - 1 - 3) = 15 < 16). (For the distribution method
     min_capacity says which S keeps min(0.9 S, Ng*) = Ng*: 56 for Ng* = 50; there Ng* counts groups,
     not species, and a smaller S is an allowed species cap.)"""
-    from jaxcoag import mc
-
     assert mc.min_capacity("distribution", 50) == 56 and mc.min_capacity("equal_mass", 16) == 20
+    assert mc.min_capacity(Distribution(), 50) == 56 and mc.min_capacity(EqualMass(), 16) == 20
     assert mc.min_capacity(None, 1000) is None
-    base = dict(n_particles=1e6, t_out=[0.5], key=jax.random.key(0))
-    _raises(lambda: mc.run(K, grouping="equal_mass", ns_target=16, capacity=19, **base),
-            r"cannot hold ns_target = 16 equal_mass species.*capacity >= 20")
+    engine = MonteCarlo(grouping=EqualMass(), ns_target=16, capacity=19, n_particles=1e6)
+    _raises(lambda: _mc(engine=engine, t_out=[0.5]),
+            r"MonteCarlo\(capacity=19\) species slots cannot hold ns_target = 16 equal-mass species.*capacity >= 20")
+    # S = 20 holds them (refused only below the bound): no error before the run
+    MonteCarlo(grouping=EqualMass(), ns_target=16, capacity=20, n_particles=1e6)._check(
+        K, Monodisperse(1.0), jnp.array([0.5]), 0.0, None, jax.random.key(0))
 
 
 def test_mc_capacity_exhaustion_is_reported_not_silent():
     """Ns > S (300 monomers, no grouping, 24 slots): the emergency merge lowers the resolution, so the
-    run says so with a CapacityWarning (and STATUS.CAPACITY); a run that fits says nothing."""
+    run says so with a CapacityWarning (and status capacity_exceeded); a run that fits says nothing."""
     import warnings
 
-    from jaxcoag import mc
-
-    kw = dict(capacity=24, dedupe=False, t_out=jnp.array([0.0, 0.5, 2.0, 50.0]))
+    t_out = jnp.array([0.0, 0.5, 2.0, 50.0])
     with pytest.warns(mc.CapacityWarning, match=r"ran out of species slots \(capacity = 24\).*capacity=48"):
-        res = mc.run(K, n_particles=300, key=jax.random.key(3), **kw)
-    assert int(res.status) & mc.STATUS.CAPACITY
+        res = _mc(engine=MonteCarlo(n_particles=300, capacity=24, dedupe=False), t_out=t_out, key=jax.random.key(3))
+    assert res.status == RESULTS.capacity_exceeded
+    assert int(res.flags) & mc.state.STATUS.CAPACITY
     with warnings.catch_warnings():
         warnings.simplefilter("error", mc.CapacityWarning)
-        ok = mc.run(K, n_particles=2, key=jax.random.key(4), **kw)
-    assert int(ok.status) == mc.STATUS.ZERO_RATE
+        ok = _mc(engine=MonteCarlo(n_particles=2, capacity=24, dedupe=False), t_out=t_out, key=jax.random.key(4))
+    # two monomers coalesce once (P(no event by t = 50) = e^-25): one particle left, total rate zero
+    assert ok.status == RESULTS.zero_rate and int(ok.n_events) == 1

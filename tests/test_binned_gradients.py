@@ -8,8 +8,9 @@ import jax
 import jax.numpy as jnp
 import diffrax
 
-from jaxcoag import kernels
-from jaxcoag.binned import MassGrid, solve_binned, monodisperse, Shattering, steady_state
+from jaxcoag import Binned, evolve, kernels
+from jaxcoag.binned import MassGrid, monodisperse, steady_state
+from jaxcoag.outcomes import Shattering
 
 G = MassGrid.log(10 ** (-0.5 / 5), 1e4, 5)
 N0 = monodisperse(G, 1.0, 1.0)
@@ -19,8 +20,8 @@ MC = jnp.asarray(G.centers)
 
 def m2_final(logb, adjoint=None):
     """Second moment sum rho_b m_b at t = 20 for the sum kernel K = b (m1 + m2)."""
-    sol = solve_binned(kernels.Sum(jnp.exp(logb)), G, N0, TS, rtol=1e-10, atol=1e-14, adjoint=adjoint)
-    return jnp.sum(sol.mass_per_bin[-1] * MC)
+    sol = evolve(kernels.Sum(jnp.exp(logb)), Binned(G, rtol=1e-10, atol=1e-14, adjoint=adjoint), N0, TS)
+    return jnp.sum(sol.mass_per_bin()[-1] * MC)
 
 
 def _fd(f, x, h=1e-4):
@@ -41,7 +42,7 @@ def test_jit_and_vmap_match():
     bs = jnp.array([0.05, 0.1, 0.2])
 
     def final_rho(b):
-        return solve_binned(kernels.Sum(b), G, N0, TS, rtol=1e-10, atol=1e-14, throw=False).mass_per_bin[-1]
+        return evolve(kernels.Sum(b), Binned(G, rtol=1e-10, atol=1e-14), N0, TS, throw=False).mass_per_bin()[-1]
 
     loop = jnp.stack([final_rho(b) for b in bs])
     vm = jax.vmap(final_rho)(bs)
@@ -59,11 +60,11 @@ def test_steady_state_implicit_gradient():
     g = MassGrid.log(1e-12, 1e8, 2)
     n0 = monodisperse(g, 1.5e-12, 1e-6)
     lc = jnp.asarray(g.log_centers)
-    guess = steady_state(TurbKernel(1e-3), g, n0, fragmentation=Shattering(100.0), t_relax=1e11,
-                         rtol=1e-5, atol=1e-10).y
+    engine = Binned(g, rtol=1e-5, atol=1e-10)
+    guess = steady_state(TurbKernel(1e-3), engine, n0, outcome=Shattering(100.0), t_relax=1e11).y
 
     def mean_logm(logvf):
-        ss = steady_state(TurbKernel(1e-3), g, None, fragmentation=Shattering(jnp.exp(logvf)), y_guess=guess)
+        ss = steady_state(TurbKernel(1e-3), engine, None, outcome=Shattering(jnp.exp(logvf)), y_guess=guess)
         rho = ss.mass_per_bin
         return jnp.sum(rho * lc) / jnp.sum(rho)
 

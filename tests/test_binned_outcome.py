@@ -1,11 +1,11 @@
 """The shared physics Outcome consumed by the binned engine (Birnstiel, Dullemond & Brauer 2010, eq. 15).
 
 Checks: per-pair mass balance and rhs conservation to round-off for O07 (DT thresholds),
-O09 (surrogate tables) and v_frag shattering; exact equivalence with the engine's own
-Shattering / ShatterToMonomers for matching outcomes; the no-fragmentation Outcome reproduces
+O09 (surrogate tables) and v_frag shattering; exact equivalence of RecipeOutcome with the
+fixed-pattern Shattering / ShatterAbove for matching outcomes; the no-fragmentation Outcome reproduces
 the two-bin coagulation tensors (merged forms: no cancellation for tiny projectiles); the
 thesis eq. 6.29-6.30 fragment bin integrals; a solve that conserves mass; and the end-to-end gradient
-d ln<m>/d ln(gamma) through solve_binned with a smooth outcome vs central finite differences.
+d ln<m>/d ln(gamma) through jaxcoag.evolve with a smooth outcome vs central finite differences.
 """
 
 import numpy as np
@@ -13,11 +13,13 @@ import pytest
 import jax
 import jax.numpy as jnp
 
-from jaxcoag import scenes
+import jaxcoag
+from jaxcoag import Binned, MassGrid, RESULTS, evolve, scenes
 from jaxcoag._validate import JaxcoagInputError
-from jaxcoag.binned import MassGrid, Shattering, ShatterToMonomers, RESULTS, solve_binned
-from jaxcoag.binned.outcome import (OutcomeFragmentation, O07Recipe, O09Recipe, ShatterAtMassRecipe,
-                                    VfragShatter, fragment_weights, place_remnant)
+from jaxcoag.binned.redistribution import fragment_weights, place_remnant
+from jaxcoag.outcomes import O07Recipe, O09Recipe, RecipeOutcome, ShatterAbove, Shattering, VfragShatter
+from jaxcoag.physics.dominik_tielens import DTEnergy
+from jaxcoag.physics.outcome import Outcome, bounce_outcome
 from jaxcoag.binned.twobin import TwoBinScheme, pair_indices, _ext_log_centers
 from jaxcoag.kernels import Constant
 from jaxcoag.physics import gas as G
@@ -42,12 +44,13 @@ def _pair_masses(grid):
     return jnp.exp(jnp.asarray(grid.log_centers))[iL]
 
 
-@pytest.mark.parametrize("recipe,width", [(O07Recipe(), 0.0), (O07Recipe(), 0.3),
-                                          (O07Recipe(restr_factor=5.0), 0.3), (O09Recipe(), 0.0),
+@pytest.mark.parametrize("recipe,width", [(O07Recipe(frag_model=DTEnergy()), 0.0),
+                                          (O07Recipe(frag_model=DTEnergy()), 0.3),
+                                          (O07Recipe(frag_model=DTEnergy(), restr_factor=5.0), 0.3), (O09Recipe(), 0.0),
                                           (O09Recipe(), 0.3), (VfragShatter(100.0), 0.0)])
 def test_mass_balance_to_round_off(recipe, width):
     kern = _kern(1e-2)
-    fr = OutcomeFragmentation(recipe, Material.ch4_silicate(), width=width)
+    fr = RecipeOutcome(recipe, Material.ch4_silicate(), width=width)
     data = SCH.precompute(kern, GRID, fr)
     bal = data.frag.mass_balance() / _pair_masses(GRID)
     assert float(jnp.max(jnp.abs(bal))) < 2e-14  # ~100 ulp of the pair mass
@@ -65,7 +68,7 @@ def test_equivalent_to_engine_shattering(prob):
     le = GRID.log_edges
     sh = Shattering(30.0, probability=prob, crater_ratio=1e300)
     rec = VfragShatter(30.0, probability=prob, m_lo=float(np.exp(le[0])), m_hi_factor=float(np.exp((le[1] - le[0]) / 2)))
-    of = OutcomeFragmentation(rec, Material.ch4_silicate())
+    of = RecipeOutcome(rec, Material.ch4_silicate())
     y = _state(GRID, 1)
     r1 = SCH.rhs(0.0, y, SCH.precompute(kern, GRID, sh))
     r2 = SCH.rhs(0.0, y, SCH.precompute(kern, GRID, of))
@@ -74,15 +77,24 @@ def test_equivalent_to_engine_shattering(prob):
     np.testing.assert_allclose(p, sh.probability(kern, GRID.centers[-1], GRID.centers[-1]), rtol=1e-14)
 
 
-def test_shatter_at_mass_equivalent_to_shatter_to_monomers():
+def test_shatter_above_equivalent_to_recipe_outcome():
+    """ShatterAbove's fixed-pattern data equal a shared-physics Outcome written independently
+    (f_pwl = H(ln(M_tot/m_frag)), all fragments at the monomer mass m0 = 1 g)."""
     g = MassGrid.log(1.0, 1e12, 4)
     mat = Material(a0=(3.0 / (4.0 * np.pi)) ** (1.0 / 3.0), rho_s=1.0, gamma=25.0, E_star=1e11, xi_crit=1e-7)
     np.testing.assert_allclose(mat.m0, 1.0, rtol=1e-14)  # monomer mass 1 g: the thesis ch. 5 units
-    of = OutcomeFragmentation(ShatterAtMassRecipe(1e10), mat)
-    assert not of.needs_velocity
+
+    def shatter_recipe(m1, psi1, m2, psi2, dv, mat, width=0.0):
+        f = jnp.where(jnp.log(m1 + m2) > jnp.log(1e10), 1.0, 0.0)
+        return Outcome.build(f_pwl=f, m_lo=mat.m0, m_hi=mat.m0, psi_one=jnp.ones_like(m1))
+
+    of = RecipeOutcome(shatter_recipe, mat, use_velocity=False)
+    sa = ShatterAbove(1e10, 1.0)
+    assert not of.needs_velocity and not sa.needs_velocity
     y = _state(g, 2)
-    r1 = SCH.rhs(0.0, y, SCH.precompute(Constant(1.0), g, ShatterToMonomers(1e10)))
+    r1 = SCH.rhs(0.0, y, SCH.precompute(Constant(1.0), g, sa))
     r2 = SCH.rhs(0.0, y, SCH.precompute(Constant(1.0), g, of))
+    assert float(jnp.max(jnp.abs(r1))) > 0  # products above 1e10 g exist on this grid
     assert float(jnp.max(jnp.abs(r1 - r2))) < 1e-13 * float(jnp.max(jnp.abs(r1)))
 
 
@@ -91,7 +103,7 @@ def test_sticking_outcome_reproduces_coagulation_tensors():
     projectiles 1e-40 times lighter than the target (merged loss/gain, no cancellation)."""
     g = MassGrid.log(1e-20, 1e20, 1)
     kern = Constant(1.0)
-    of = OutcomeFragmentation(O07Recipe(frag_model=None), Material.ch6_ice(), use_velocity=False)
+    of = RecipeOutcome(O07Recipe(frag_model=None), Material.ch6_ice(), use_velocity=False)
     y = _state(g, 3)
     r0 = SCH.rhs(0.0, y, TwoBinScheme(gel_sweep=False).precompute(kern, g))
     r2 = SCH.rhs(0.0, y, SCH.precompute(kern, g, of))
@@ -106,21 +118,18 @@ def test_sticking_outcome_reproduces_coagulation_tensors():
 def test_bounce_changes_nothing_and_eff_scales_the_kernel():
     """A pure bounce (p_two = 1, split = m1/M_tot: two remnants equal to the parents) leaves the
     distribution unchanged; eff = 1/2 halves the sticking rates."""
-    from jaxcoag.physics.outcomes import Outcome, bounce_outcome
+    def bounce(m1, psi1, m2, psi2, dv, mat, width=0.0):
+        return bounce_outcome(m1, psi1, m2, psi2, mat.m0)
 
-    def bounce(m1, m2, dv, mat, width=0.0):
-        one = jnp.ones_like(m1)
-        return bounce_outcome(m1, one, m2, one, mat.m0)
-
-    def half_stick(m1, m2, dv, mat, width=0.0):
+    def half_stick(m1, psi1, m2, psi2, dv, mat, width=0.0):
         return Outcome.build(eff=0.5, m_lo=mat.m0, m_hi=mat.m0, psi_one=jnp.ones_like(m1))
 
     kern, y = Constant(1.0), _state(GRID, 5)
     mat = Material.ch4_silicate()
-    rb = SCH.rhs(0.0, y, SCH.precompute(kern, GRID, OutcomeFragmentation(bounce, mat, use_velocity=False)))
+    rb = SCH.rhs(0.0, y, SCH.precompute(kern, GRID, RecipeOutcome(bounce, mat, use_velocity=False)))
     r0 = SCH.rhs(0.0, y, TwoBinScheme(gel_sweep=False).precompute(kern, GRID))
     assert float(jnp.max(jnp.abs(rb))) < 1e-13 * float(jnp.max(jnp.abs(r0)))
-    rh = SCH.rhs(0.0, y, SCH.precompute(kern, GRID, OutcomeFragmentation(half_stick, mat, use_velocity=False)))
+    rh = SCH.rhs(0.0, y, SCH.precompute(kern, GRID, RecipeOutcome(half_stick, mat, use_velocity=False)))
     np.testing.assert_allclose(rh, 0.5 * r0, rtol=1e-12, atol=1e-14 * float(jnp.max(jnp.abs(r0))))
 
 
@@ -166,12 +175,12 @@ def test_o09_cloud_solve_conserves_mass():
     grid = MassGrid.log(float(mat.m0) * 0.7, 1e-2, 1)
     n0 = np.zeros(grid.nbins)
     n0[0] = 0.01 * gas.rho_g / grid.centers[0]
-    fr = OutcomeFragmentation(O09Recipe(), mat, width=0.3)
+    fr = RecipeOutcome(O09Recipe(), mat, width=0.3)
     yr = 3.15576e7
-    sol = solve_binned(kern, grid, jnp.asarray(n0), jnp.array([0.0, 1e5 * yr, 1e6 * yr]), fragmentation=fr)
-    assert bool(sol.result == RESULTS.successful)
+    sol = evolve(kern, Binned(grid), jnp.asarray(n0), jnp.array([0.0, 1e5 * yr, 1e6 * yr]), outcome=fr)
+    assert bool(sol.status == RESULTS.successful)
     assert float(jnp.max(jnp.abs(sol.mass_drift))) < 1e-9
-    m_mean = jnp.sum(sol.mass_per_bin * grid.centers[None, :], axis=1) / jnp.sum(sol.mass_per_bin, axis=1)
+    m_mean = jnp.sum(sol.rho * grid.centers[None, :], axis=1) / jnp.sum(sol.rho, axis=1)
     assert float(m_mean[-1]) > 100 * float(mat.m0)
 
 
@@ -180,18 +189,18 @@ def _log_mean_mass(lp, t_end=1e11):
     base = Material.ch4_silicate()
     mat = Material(a0=base.a0, rho_s=base.rho_s, gamma=jnp.exp(lp[0]), E_star=jnp.exp(lp[1]),
                    xi_crit=base.xi_crit, A_br=base.A_br, A_roll=base.A_roll, roll="A")
-    fr = OutcomeFragmentation(O07Recipe(), mat, width=0.3)
+    fr = RecipeOutcome(O07Recipe(frag_model=DTEnergy()), mat, width=0.3)
     n0 = np.zeros(GRID.nbins)
     n0[0] = 2.4e-13 / GRID.centers[0]
-    sol = solve_binned(_kern(1e-3), GRID, jnp.asarray(n0), jnp.array([0.0, t_end]), fragmentation=fr, rtol=1e-8)
-    rho = sol.mass_per_bin[-1]
+    sol = evolve(_kern(1e-3), Binned(GRID, rtol=1e-8), jnp.asarray(n0), jnp.array([0.0, t_end]), outcome=fr)
+    rho = sol.rho[-1]
     return jnp.log(jnp.sum(rho * GRID.centers) / jnp.sum(rho)), sol
 
 
 def test_gradient_wrt_surface_energy_and_modulus_matches_fd():
     lp = jnp.log(jnp.array([19.0, 3.7e11]))
     val, sol = _log_mean_mass(lp)
-    assert bool(sol.result == RESULTS.successful) and abs(float(sol.mass_drift[-1])) < 1e-12
+    assert bool(sol.status == RESULTS.successful) and abs(float(sol.mass_drift[-1])) < 1e-12
     assert float(val) > np.log(1e-9)  # grew from 1e-11 g
     f = lambda x: _log_mean_mass(x)[0]
     g = jax.grad(f)(lp)
@@ -207,14 +216,18 @@ def test_gradient_wrt_surface_energy_and_modulus_matches_fd():
 
 
 def test_bad_inputs_raise():
-    with pytest.raises(JaxcoagInputError, match="callable"):
-        OutcomeFragmentation(3.0, Material.ch4_silicate())
+    with pytest.raises(JaxcoagInputError, match="recipe"):
+        RecipeOutcome(3.0, Material.ch4_silicate())
     with pytest.raises(JaxcoagInputError, match="Material"):
-        OutcomeFragmentation(O07Recipe(), {"gamma": 19.0})
+        RecipeOutcome(O07Recipe(), {"gamma": 19.0})
     with pytest.raises(JaxcoagInputError, match="width"):
-        OutcomeFragmentation(O07Recipe(), Material.ch4_silicate(), width=-1.0)
+        RecipeOutcome(O07Recipe(), Material.ch4_silicate(), width=-1.0)
     with pytest.raises(TypeError, match="no relative velocity"):
-        SCH.precompute(Constant(1.0), GRID, OutcomeFragmentation(O07Recipe(), Material.ch4_silicate()))
+        SCH.precompute(Constant(1.0), GRID, RecipeOutcome(O07Recipe(), Material.ch4_silicate()))
+    # the same refusal from evolve, before any work
+    with pytest.raises(TypeError, match="no relative velocity"):
+        evolve(Constant(1.0), Binned(GRID), jaxcoag.Monodisperse(GRID.centers[0]), jnp.array([1.0]),
+               outcome=RecipeOutcome(O07Recipe(), Material.ch4_silicate()))
     with pytest.raises(JaxcoagInputError, match="probability"):
         VfragShatter(100.0, probability="bogus")
 
@@ -229,7 +242,7 @@ def test_jit_and_vmap_match_eager():
     def frag_mass(lg):
         mat = Material(a0=base.a0, rho_s=base.rho_s, gamma=jnp.exp(lg), E_star=base.E_star, xi_crit=base.xi_crit,
                        A_br=base.A_br, A_roll=base.A_roll, roll="A")
-        d = SCH.precompute(kern, GRID, OutcomeFragmentation(O07Recipe(), mat, width=0.3))
+        d = SCH.precompute(kern, GRID, RecipeOutcome(O07Recipe(frag_model=DTEnergy()), mat, width=0.3))
         return SCH.rhs(0.0, _state(GRID, 4), d)
 
     lgs = jnp.log(jnp.array([5.0, 19.0, 80.0]))
@@ -250,8 +263,8 @@ def test_steady_state_implicit_gradient_wrt_v_frag():
     n0[0] = 2.4e-13 / GRID.centers[0]
 
     def f(lv):
-        fr = OutcomeFragmentation(VfragShatter(jnp.exp(lv)), Material.ch4_silicate())
-        ss = steady_state(_kern(1e-3), GRID, jnp.asarray(n0), fragmentation=fr, t_relax=1e12)
+        fr = RecipeOutcome(VfragShatter(jnp.exp(lv)), Material.ch4_silicate())
+        ss = steady_state(_kern(1e-3), Binned(GRID), jnp.asarray(n0), outcome=fr, t_relax=1e12)
         rho = ss.mass_per_bin
         return jnp.log(jnp.sum(rho * GRID.centers) / jnp.sum(rho))
 

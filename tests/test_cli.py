@@ -1,14 +1,17 @@
-"""`jaxcoag run / plot / sweep / config` end to end (quick mode), and refused runs: exit code 2,
-the reason on stderr, no output file - one test per category of bad input."""
+"""`jaxcoag run / plot / sweep / config` end to end (quick mode) for both engines, and refused runs:
+exit code 2, the reason on stderr, no output file - one test per category of bad input."""
 
+import io as _stdio
 import os
 
 import numpy as np
 import pytest
 
-from jaxcoag import cli, config, io, runner
+from jaxcoag import checkpoint as ckmod
+from jaxcoag import cli, config, diagnostics, io, runner
+from jaxcoag._dataset import COMMON_COORDS, COMMON_VARIABLES
 
-from _configs import SMALL  # noqa: E402  (shared test configuration)
+from _configs import SMALL, SMALL_MC  # noqa: E402  (shared test configurations)
 
 
 @pytest.fixture(scope="module")
@@ -28,14 +31,13 @@ def test_run_quick_default_end_to_end(quick_run, capsys):
     assert os.path.exists(str(out) + ".ckpt.npz")
     cfg = config.loads(ds.attrs["config_toml"])
     assert cfg["gas"]["model"] == "mmsn_hayashi81" and cfg["fragmentation"]["v_frag"] == 1000.0
-    assert ds.attrs["result"] == "successful" and int(ds["result_code"]) == 0
-    t = ds["time"].values
-    assert t[0] == 0 and np.all(np.diff(t) > 0)
+    assert ds.attrs["status"] == "successful" and int(ds["status"]) == 0 and ds.attrs["engine"] == "binned"
+    t = ds["t"].values
+    assert t[0] == 0 and np.all(np.diff(t) > 0) and t.size == 9
     np.testing.assert_allclose(t[-1], 1e4 * 3.15576e7, rtol=1e-12)
     # mass conserved through growth and fragmentation
     assert np.max(np.abs(ds["mass_drift"].values)) < 1e-10
-    sol = runner.solution_from_dataset(ds)
-    mp = np.array([float(v) for v in __import__("jaxcoag").diagnostics.mass_peak(sol.mass_per_bin, sol.grid)])
+    mp = np.asarray(diagnostics.mass_peak(ds["mass_per_bin"].values, ds["m_edge"].values))
     # grows by > 10 decades in mass from the 1 um monomers, then saturates at the fragmentation barrier
     assert mp[-1] > 1e10 * mp[0]
     np.testing.assert_allclose(mp[-1], mp[-2], rtol=1e-3)
@@ -44,7 +46,8 @@ def test_run_quick_default_end_to_end(quick_run, capsys):
     st_peak = float(kern.particles(mp[-1]).st)
     st_frag = 1000.0 ** 2 / (3 * 1e-3 * ds.attrs["c_g"] ** 2)
     assert 0.1 * st_frag < st_peak < st_frag  # below the Birnstiel et al. (2012) barrier, same order
-    assert int(ds["segment_steps"].sum()) == int(ds["steps"])
+    # one checkpoint segment per output time (t = 0 included), all done
+    assert ckmod.read_info(str(out) + ".ckpt.npz")["n_done"] == 9
 
 
 def test_plot_subcommand(quick_run, tmp_path, capsys):
@@ -69,7 +72,7 @@ def test_resume_of_a_finished_run_rebuilds_the_same_file(quick_run, tmp_path, ca
                      "--resume"]) == 0
     a, b = io.load_netcdf(out), io.load_netcdf(again)
     np.testing.assert_array_equal(a["mass_per_bin"].values, b["mass_per_bin"].values)
-    assert "resumed from segment 8" in capsys.readouterr().out
+    assert "(resumed after output 9)" in capsys.readouterr().out
 
 
 def _write(tmp_path, text, name="s.toml"):
@@ -124,10 +127,10 @@ def test_small_run_from_toml_and_no_subcommand_means_run(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "jaxcoag run 'small_growth'" in printed and "result: successful" in printed
     ds = io.load_netcdf(out)
-    assert ds["mass_per_bin"].shape == (4, ds.sizes["mass"])
+    assert ds["mass_per_bin"].shape == (4, ds.sizes["m"])
     assert not (tmp_path / "r.png").exists() and not (tmp_path / "r.nc.ckpt.npz").exists()
     assert ds["mass_per_bin"].values[-1].argmax() > ds["mass_per_bin"].values[0].argmax()  # it grew
-    # a run stopped after one output interval writes no netCDF yet (exit 1); --resume finishes it identically
+    # a run stopped after one output time writes no netCDF yet (exit 1); --resume finishes it identically
     out2 = tmp_path / "r2.nc"
     assert cli.main([path, "--no-progress", "--no-figure", "--max-segments", "1", "--out", str(out2)]) == 1
     assert "continue with --resume" in capsys.readouterr().out
@@ -152,7 +155,7 @@ def test_sweep_subcommand_quick(tmp_path, capsys):
     assert list(ds["alpha"].values) == [1e-4, 1e-3] and list(ds["rho_s"].values) == [1.0, 1.6]
     single = runner.run(config.loads(SMALL), out=str(tmp_path / "one.nc"), progress=False, verbose=False,
                         save=False, checkpoint=False)
-    ref = np.asarray(single.solution.mass_per_bin)
+    ref = np.asarray(single.result.mass_per_bin())
     member = ds["mass_per_bin"].values[1, 1]
     big = ref > 1e-6 * ref[0].sum()
     np.testing.assert_allclose(member[big], ref[big], rtol=1e-4)
@@ -177,7 +180,7 @@ def test_sweep_member_equals_single_run(tmp_path):
     # the sweep integrates in one go, the run restarts its adaptive steps at every output segment: equal
     # to the solver tolerance (SMALL: rtol = 1e-4) on every bin above 1e-6 of the mass, at every output
     # (measured: max relative difference 1.9e-5 at the second output, 2.6e-6 at the last)
-    ref = np.asarray(single.solution.mass_per_bin)
+    ref = np.asarray(single.result.mass_per_bin())
     got = ds["mass_per_bin"].values[0]
     big = ref > 1e-6 * ref[0].sum()
     np.testing.assert_allclose(got[big], ref[big], rtol=1e-4)
@@ -196,6 +199,22 @@ def test_config_subcommand_prints_the_default(capsys):
     assert cli.main(["config", "--resolved"]) == 0
     resolved = capsys.readouterr().out
     assert "m_min = " in resolved and "m0 = " in resolved  # computed defaults are shown
+    import tomllib
+    assert tomllib.loads(resolved)["grid"]["m_min"] == config.default()["grid"]["m_min"]  # written exactly
+
+
+def test_config_engine_mc_prints_a_runnable_grouped_default_of_the_same_scene(capsys):
+    assert cli.main(["config", "--engine", "mc"]) == 0
+    text = capsys.readouterr().out
+    mc = config.loads(text)
+    binned = config.default()
+    assert mc.data == config.default("mc").data and mc.engine == "mc" and binned.engine == "binned"
+    assert mc["mc"]["grouping"] in ("equal_mass", "distribution") and mc["mc"]["n_particles"] > 1e20
+    # the same physics as the binned default, so that the two figures compare
+    for section in ("scene", "gas", "dust", "grid", "fragmentation"):
+        assert mc[section] == binned[section], section
+    assert mc["output"]["path"] != binned["output"]["path"]  # its own file next to the binned one
+    assert "# measured:" in text  # the comment states the measured run time
 
 
 @pytest.mark.slow
@@ -206,7 +225,7 @@ def test_full_default_run_reaches_the_fragmentation_barrier(tmp_path):
     assert res.numbers["max_abs_mass_drift"] < 1e-12
     mp = np.array([r["m_peak"] for r in res.rows])
     np.testing.assert_allclose(mp[-6:], mp[-1], rtol=1e-4)  # steady for the last ~1e4 yr
-    np.testing.assert_allclose(mp[-1], 773.07, rtol=1e-3)  # measured 773.07 g (a = 4.87 cm)
+    np.testing.assert_allclose(mp[-1], 757.71, rtol=1e-3)  # measured 757.709 g (as the README states)
     assert 0.3 * res.numbers["st_frag"] < res.numbers["st_peak"] < res.numbers["st_frag"]
     assert os.path.getsize(res.figure) > 50_000
 
@@ -218,39 +237,41 @@ def test_solver_failure_exits_1_and_saves_the_outputs_before_it(tmp_path, capsys
     assert rc == 1
     assert "result: max_steps_reached" in capsys.readouterr().out
     ds = io.load_netcdf(out)
-    assert ds.attrs["result"] == "max_steps_reached" and int(ds["result_code"]) != 0
-    assert ds.sizes["time"] >= 1 and np.all(np.isfinite(ds["mass_per_bin"].values))
+    assert ds.attrs["status"] == "max_steps_reached" and int(ds["status"]) != 0
+    assert ds["status"].attrs["status_name"] == "max_steps_reached"
+    assert ds.sizes["t"] >= 1 and np.all(np.isfinite(ds["mass_per_bin"].values))
 
 
 def _interrupt_at(monkeypatch, n):
-    """Patch the segment solver so that the n-th output interval raises KeyboardInterrupt (Ctrl-C)."""
-    from jaxcoag import checkpoint as ckmod
+    """Patch the binned engine's advance so that its n-th call from now (the n-th output time) raises
+    KeyboardInterrupt (Ctrl-C); returns the real method."""
+    import jaxcoag
 
-    real = ckmod._segment_solver
+    real = _REAL_ADVANCE
+    calls = []
 
-    def patched(*a, **k):
-        step = real(*a, **k)
-        calls = []
+    def maybe_interrupted(self, *a, **k):
+        calls.append(1)
+        if len(calls) == n:
+            raise KeyboardInterrupt
+        return real(self, *a, **k)
 
-        def maybe_interrupted(y, t0, t1):
-            calls.append(t1)
-            if len(calls) == n:
-                raise KeyboardInterrupt
-            return step(y, t0, t1)
-
-        return maybe_interrupted
-
-    monkeypatch.setattr(ckmod, "_segment_solver", patched)
+    monkeypatch.setattr(jaxcoag.Binned, "_advance", maybe_interrupted)
     return real
 
 
+import jaxcoag as _jc  # noqa: E402
+
+_REAL_ADVANCE = _jc.Binned._advance
+
+
 def test_ctrl_c_checkpoints_prints_the_resume_command_and_exits_130(tmp_path, capsys, monkeypatch):
-    """Ctrl-C in the 2nd of 3 output intervals: exit 130, the completed interval is in the
-    checkpoint (no netCDF yet), stderr ends with the exact command that resumes; running that
+    """Ctrl-C in the 2nd of 4 output times (t = 0 and 3 outputs): exit 130, the completed output is
+    in the checkpoint (no netCDF yet), stderr ends with the exact command that resumes; running that
     command finishes the run bit for bit like an uninterrupted one."""
     import shlex
 
-    from jaxcoag import checkpoint as ckmod
+    import jaxcoag
 
     path = _write(tmp_path, SMALL)
     out = tmp_path / "int" / "r.nc"
@@ -258,26 +279,26 @@ def test_ctrl_c_checkpoints_prints_the_resume_command_and_exits_130(tmp_path, ca
     argv = ["run", path, "--no-progress", "--no-figure", "--out", str(out)]
     assert cli.main(argv) == 130
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-2] == f"jaxcoag run: interrupted after 1 of 3 output intervals; checkpoint saved to {out}.ckpt.npz"
+    assert err[-2] == f"jaxcoag run: interrupted after 1 of 4 output times; checkpoint saved to {out}.ckpt.npz"
     assert err[-1] == "resume with: " + shlex.join(["jaxcoag"] + argv + ["--resume"])
-    ck = ckmod.load_checkpoint(str(out) + ".ckpt.npz")
-    assert ck["ys"].shape[0] == 2 and ck["steps"].size == 1 and not out.exists()
+    assert ckmod.read_info(str(out) + ".ckpt.npz")["n_done"] == 1 and not out.exists()
     # --no-checkpoint: nothing to save; the message says so and nothing is written
     out2 = tmp_path / "nock" / "r.nc"
     argv2 = ["run", path, "--no-progress", "--no-figure", "--no-checkpoint", "--out", str(out2)]
+    _interrupt_at(monkeypatch, 2)
     assert cli.main(argv2) == 130
     err2 = capsys.readouterr().err.strip().splitlines()
     assert err2[-2] == "jaxcoag run: interrupted; no checkpoint was saved (--no-checkpoint)."
     assert not (tmp_path / "nock").exists()
-    monkeypatch.setattr(ckmod, "_segment_solver", real)
+    monkeypatch.setattr(jaxcoag.Binned, "_advance", real)
     cmd = shlex.split(err[-1][len("resume with: "):])
     assert cmd[0] == "jaxcoag" and cli.main(cmd[1:]) == 0
-    assert "(resumed from segment 1)" in capsys.readouterr().out
+    assert "(resumed after output 1)" in capsys.readouterr().out
     ref = tmp_path / "ref.nc"
     assert cli.main(["run", path, "--no-progress", "--no-figure", "--no-checkpoint", "--out", str(ref)]) == 0
     a, b = io.load_netcdf(out), io.load_netcdf(ref)
-    np.testing.assert_array_equal(a["mass_per_bin"].values, b["mass_per_bin"].values)
-    np.testing.assert_array_equal(a["segment_steps"].values, b["segment_steps"].values)
+    for name in ("mass_per_bin", "number_per_bin", "gel_mass", "mass_drift", "steps", "rejected_steps"):
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
 
 
 @pytest.mark.slow
@@ -305,12 +326,82 @@ def test_sigint_to_a_running_jaxcoag_run_process(tmp_path):
     lines = err.strip().splitlines()
     assert lines[-1].startswith("resume with: jaxcoag run ") and lines[-1].endswith(" --resume"), err
     n_done = int(lines[-2].split("interrupted after ")[1].split(" of ")[0])
-    assert 1 <= n_done < 300 and not out.exists()
+    assert 1 <= n_done < 301 and not out.exists()
     again = shlex.split(lines[-1][len("resume with: "):])
     r = subprocess.run([sys.executable, "-m", "jaxcoag.cli"] + again[1:], capture_output=True, text=True,
                        cwd=tmp_path, timeout=500)
     assert r.returncode == 0, r.stderr
-    assert f"(resumed from segment {n_done})" in r.stdout
+    assert f"(resumed after output {n_done})" in r.stdout
     ref = runner.run(config.loads(text), out=tmp_path / "ref.nc", save=False, progress=False, verbose=False)
-    np.testing.assert_array_equal(io.load_netcdf(out)["mass_per_bin"].values,
-                                  np.asarray(ref.solution.mass_per_bin))
+    np.testing.assert_array_equal(io.load_netcdf(out)["mass_per_bin"].values, ref.dataset["mass_per_bin"].values)
+
+
+# ------------------------------------------------------------------------------ the Monte Carlo engine
+@pytest.fixture(scope="module")
+def small_pair(tmp_path_factory):
+    """SMALL with the binned engine (file) and SMALL_MC with the Monte Carlo engine (read from stdin)."""
+    d = tmp_path_factory.mktemp("pair")
+    b, m = d / "binned.nc", d / "mc.nc"
+    mp = pytest.MonkeyPatch()
+    try:
+        path = d / "small.toml"
+        path.write_text(SMALL)
+        rc_b = cli.main(["run", str(path), "--no-progress", "--no-figure", "--no-checkpoint", "--out", str(b)])
+        mp.setattr("sys.stdin", _stdio.StringIO(SMALL_MC))
+        rc_m = cli.main(["run", "-", "--no-progress", "--out", str(m)])
+    finally:
+        mp.undo()
+    return rc_b, rc_m, b, m
+
+
+def test_mc_run_from_stdin_writes_the_binned_layout(small_pair):
+    """`jaxcoag config --engine mc | jaxcoag run -` path: the Monte Carlo file has the coordinates,
+    dims and common variables of the binned file, on the same [grid] bins, with the same a / St."""
+    rc_b, rc_m, b, m = small_pair
+    assert rc_b == 0 and rc_m == 0
+    db, dm = io.load_netcdf(b), io.load_netcdf(m)
+    assert db.attrs["engine"] == "binned" and dm.attrs["engine"] == "mc"
+    assert dm.attrs["status"] == "successful" and int(dm["status"]) == 0
+    for name in COMMON_COORDS + ("a", "St"):
+        assert name in db.coords and name in dm.coords, name
+        assert db[name].dims == dm[name].dims and db[name].attrs["units"] == dm[name].attrs["units"], name
+        np.testing.assert_array_equal(db[name].values, dm[name].values, err_msg=name)
+    for name in COMMON_VARIABLES:
+        assert db[name].dims == dm[name].dims and db[name].attrs["units"] == dm[name].attrs["units"], name
+    assert dm["mass_per_bin"].dims == ("t", "m") and dm.sizes["t"] == 4
+    np.testing.assert_allclose(dm["t_yr"].values, [0.0, 1e-3, 0.1, 10.0], rtol=1e-12)  # log spacing from 1e-4 t_end
+    # constant volume: every output holds the initial dust density 0.01 rho_g, to round-off
+    rho_d = 0.01 * float(dm.attrs["rho_g"])
+    total = dm["mass_per_bin"].values.sum(axis=1) + dm["gel_mass"].values
+    np.testing.assert_allclose(total, rho_d, rtol=1e-12)
+    assert np.max(np.abs(dm["mass_drift"].values)) < 1e-12
+    # t = 0: all mass in the monomer bin, in both files
+    np.testing.assert_allclose(dm["mass_per_bin"].values[0], db["mass_per_bin"].values[0], rtol=1e-12, atol=0)
+    # the Monte Carlo species arrays come along
+    for name in ("m_species", "log_g", "valid", "n_events"):
+        assert name in dm.variables, name
+    assert int(dm["n_events"].values[-1]) > 0
+    assert os.path.getsize(runner.figure_path(str(m))) > 20_000  # the same panel figure
+
+
+def test_mc_cli_resume_is_bit_identical(tmp_path, capsys, small_pair):
+    """A Monte Carlo run stopped after 2 output times and resumed from its checkpoint writes the same
+    file as the uninterrupted run (every array equal, bit for bit)."""
+    _, _, _, ref = small_pair
+    path = _write(tmp_path, SMALL_MC, "mc.toml")
+    out = tmp_path / "r.nc"
+    argv = ["run", path, "--no-progress", "--no-figure", "--out", str(out)]
+    assert cli.main(argv + ["--max-segments", "2"]) == 1
+    assert "continue with --resume" in capsys.readouterr().out and not out.exists()
+    assert ckmod.read_info(str(out) + ".ckpt.npz")["n_done"] == 2
+    assert cli.main(argv + ["--resume"]) == 0
+    assert "(resumed after output 2)" in capsys.readouterr().out
+    a, b = io.load_netcdf(out), io.load_netcdf(ref)
+    assert set(a.data_vars) == set(b.data_vars)
+    for name in a.data_vars:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    # a checkpoint of the binned run of the same physics is refused (another run), nothing written
+    bin_out = tmp_path / "b.nc"
+    assert cli.main(["run", path, "--engine", "binned", "--no-progress", "--no-figure", "--out", str(bin_out),
+                     "--checkpoint", str(out) + ".ckpt.npz", "--resume"]) == 2
+    assert "checkpoint" in capsys.readouterr().err and not bin_out.exists()

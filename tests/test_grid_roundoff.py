@@ -13,14 +13,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxcoag import Binned, evolve
 from jaxcoag._validate import JaxcoagInputError
-from jaxcoag.binned import MassGrid, Shattering, ShatterToMonomers, monodisperse, solve_binned
+from jaxcoag.binned import MassGrid, monodisperse
 from jaxcoag.binned.grid import LOG_TOL
-from jaxcoag.binned.outcome import fragment_weights
+from jaxcoag.binned.redistribution import fragment_weights
 from jaxcoag.binned.twobin import pair_indices
-from jaxcoag.mc.recipe_outcome import o07_recipe
+from jaxcoag.outcomes import O07Recipe, ShatterAbove, Shattering
 from jaxcoag.physics.contact import Material
-from jaxcoag.physics.outcomes import o07_outcome
+from jaxcoag.physics.ormel07 import o07_outcome
 
 from _testkernels import SqrtAlphaKernel  # noqa: E402  (shared test kernel)
 
@@ -83,8 +84,8 @@ def _frag_run(crater_ratio):
     bpd = 7
     g = MassGrid.log(1e-4 * 10 ** (-0.5 / bpd), 1e2, bpd)
     ts = np.concatenate([[0.0], np.logspace(4, 10, 4)])
-    sol = solve_binned(KERNEL, g, monodisperse(g, 1e-4, 1e-6), ts,
-                       fragmentation=Shattering(100.0, crater_ratio=crater_ratio), rtol=1e-5, atol=1e-10)
+    sol = evolve(KERNEL, Binned(g, rtol=1e-5, atol=1e-10), monodisperse(g, 1e-4, 1e-6), ts,
+                 outcome=Shattering(100.0, crater_ratio=crater_ratio))
     return g, sol
 
 
@@ -94,7 +95,7 @@ def test_fragmentation_run_identical_for_crater_ratio_10_and_a_hair_below():
     by L1 = 1.1e-4 (relative), the mass-weighted mean mass by 8e-4."""
     g, a = _frag_run(10.0)
     _, b = _frag_run(10.0 * (1.0 - 1e-9))
-    ra, rb = np.asarray(a.mass_per_bin), np.asarray(b.mass_per_bin)
+    ra, rb = np.asarray(a.mass_per_bin()), np.asarray(b.mass_per_bin())
     np.testing.assert_array_equal(ra, rb)
     np.testing.assert_array_equal(np.asarray(a.gel_mass), np.asarray(b.gel_mass))
     # it is a fragmentation-limited steady state (the branch matters): mass conserved, steady,
@@ -105,11 +106,11 @@ def test_fragmentation_run_identical_for_crater_ratio_10_and_a_hair_below():
     assert float(a.gel_mass[-1]) < 1e-12 * 1e-6
 
 
-def test_shatter_to_monomers_product_exactly_at_m_frag_sticks():
-    """ShatterToMonomers: a product exactly at m_frag does not exceed it (sticks), also when the
+def test_shatter_above_product_exactly_at_m_frag_sticks():
+    """ShatterAbove: a product exactly at m_frag does not exceed it (sticks), also when the
     sum of two bin centres rounds one ulp above (2 x 4.000000000000001 = 8.000000000000002 on a
     grid with centres 1, 2, 4, ... g: the bare ``>`` shattered that pair)."""
-    frag = ShatterToMonomers(8.0)
+    frag = ShatterAbove(8.0, 1.0)  # monomers of 1 g: the bottom bin of the factor-2 grid below
     m4 = jnp.nextafter(4.0, 5.0)
     assert float(m4 + m4) > 8.0
     assert float(frag.probability(None, m4, m4)) == 0.0
@@ -154,7 +155,7 @@ def test_degenerate_fragment_range_on_a_bin_edge():
 
 
 def test_o07_small_n_branch_for_a_product_of_exactly_n_small_monomers():
-    """o07_recipe(n_small=40): a product of exactly 40 monomers uses B = 0 even when its mass,
+    """O07Recipe(n_small=40): a product of exactly 40 monomers uses B = 0 even when its mass,
     summed in float64, is one ulp above 40 m0 (as 2 of 5 distinct float representations of 40 m0
     were when built by random sticking of m0 = 1.26e-15 g); before the fix it took B = 1
     (psi = 3.385 instead of 2.990 here). 41 monomers still use B = 1."""
@@ -162,7 +163,7 @@ def test_o07_small_n_branch_for_a_product_of_exactly_n_small_monomers():
     m0 = float(mat.m0)
     m1, m2 = np.nextafter(32 * m0, np.inf), 8 * m0
     assert (m1 + m2) / m0 > 40.0
-    rec = o07_recipe(n_small=40)
+    rec = O07Recipe(n_small=40)
     dv = 1e-2
     psi = float(rec(jnp.asarray(m1), 3.0, jnp.asarray(m2), 2.0, dv, mat).psi_one)
     b0 = float(o07_outcome(m1, 3.0, m2, 2.0, dv, mat, B=0.0, validate=False).psi_one)

@@ -1,5 +1,6 @@
-"""Monte Carlo API: custom initial states, statistics helpers (M_L1, M_L2 of docs/design_notes.md), the runaway
-stop predicate, MCResult.to_xarray and the netCDF round trip."""
+"""Monte Carlo API: the MonteCarlo engine object under jaxcoag.evolve (validation, t0, continuation), custom
+initial states, statistics helpers (M_L1, M_L2 of docs/design_notes.md), the runaway stop predicate, the
+flags -> RESULTS mapping, MCResult.to_xarray in the common layout of every engine and the netCDF round trip."""
 
 import math
 import types
@@ -9,10 +10,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxcoag as jc
 from jaxcoag import io
 from jaxcoag import kernels as K
 from jaxcoag import mc
 from jaxcoag._validate import JaxcoagInputError
+from jaxcoag.mc.state import STATUS, flags_to_code
 
 LN2 = math.log(2.0)
 
@@ -26,7 +29,8 @@ def _hand_result():
     V = jnp.array([2.0, 2.0])
     return mc.MCResult(t=jnp.array([0.0, 1.0]), m=m, logm=jnp.log(m), psi=jnp.zeros((2, 4, 0)), w=w, z=z,
                        valid=valid, V=V, logV=jnp.log(V), M_tot=jnp.array([40.0, 52.0]),
-                       n_events_snap=jnp.array([0, 7]), status=jnp.array(mc.STATUS.STOPPED, jnp.int32),
+                       n_events_snap=jnp.array([0, 7]), status=jc.RESULTS.stopped,
+                       flags=jnp.array(STATUS.STOPPED, jnp.int32),
                        n_events=jnp.array(7), n_dup=jnp.array(0), n_merge=jnp.array(0), t_stop=jnp.array(0.8),
                        config=(("mode", "const_v"), ("capacity", 4), ("kernel", "Constant")))
 
@@ -90,23 +94,96 @@ def test_initial_species_forms_and_errors():
             mc.initial_species([1.0, 2.0], **kw)
     with pytest.raises(JaxcoagInputError, match="m"):
         mc.initial_species([1.0, -2.0], g=[1, 1])
+    with pytest.raises(JaxcoagInputError, match="V= .* or rho_d="):
+        mc.initial_species([1.0, 2.0], g=[1, 1], V=2.0, rho_d=1.0)
+
+
+def test_engine_validation_before_any_work():
+    """Every refusal comes from MonteCarlo(...) or evolve's check, with a message naming what to change."""
     t = jnp.array([1.0])
     key = jax.random.key(0)
-    with pytest.raises(JaxcoagInputError, match="exactly one"):
-        mc.run(K.Constant(1.0), t_out=t, key=key)
-    with pytest.raises(JaxcoagInputError, match="exactly one"):
-        mc.run(K.Constant(1.0), n_particles=5, initial=a, t_out=t, key=key)
-    with pytest.raises(JaxcoagInputError, match="rho_d"):
-        mc.run(K.Constant(1.0), initial=c, rho_d=2.0, t_out=t, key=key)
+    kc = K.Constant(1.0)
+    mono = jc.Monodisperse(1.0)
+    a = mc.initial_species([1.0, 2.0], g=[10, 3])
+    with pytest.raises(JaxcoagInputError, match="n_particles"):
+        jc.evolve(kc, mc.MonteCarlo(), mono, t, key=key)
+    with pytest.raises(JaxcoagInputError, match="drop n_particles"):
+        jc.evolve(kc, mc.MonteCarlo(n_particles=5), a, t, key=key)
     with pytest.raises(JaxcoagInputError, match="key"):
-        mc.run(K.Constant(1.0), n_particles=5, t_out=t)
+        jc.evolve(kc, mc.MonteCarlo(n_particles=5), mono, t)
+    with pytest.raises(JaxcoagInputError, match="key"):
+        jc.evolve(kc, mc.MonteCarlo(n_particles=5), mono, t, key=3)
     with pytest.raises(JaxcoagInputError, match="capacity"):
-        mc.run(K.Constant(1.0), initial=mc.initial_species([1.0, 2.0, 3.0, 4.0], g=[1, 1, 1, 1]), t_out=t, key=key,
-               capacity=6)
+        jc.evolve(kc, mc.MonteCarlo(capacity=6), mc.initial_species([1.0, 2.0, 3.0, 4.0], g=[1, 1, 1, 1]), t, key=key)
     with pytest.raises(JaxcoagInputError, match="stop"):
-        mc.run(K.Constant(1.0), n_particles=5, t_out=t, key=key, stop=3.0)
-    with pytest.raises(JaxcoagInputError, match="resume_from"):
-        mc.run(K.Constant(1.0), n_particles=5, t_out=t, key=key, resume_from=_hand_result())
+        mc.MonteCarlo(stop=3.0)
+    with pytest.raises(JaxcoagInputError, match="initial"):
+        jc.evolve(kc, mc.MonteCarlo(n_particles=5), _hand_result(), t, key=key)  # no final_state
+    with pytest.raises(JaxcoagInputError, match="initial"):
+        jc.evolve(kc, mc.MonteCarlo(n_particles=5), 3.0, t, key=key)
+    with pytest.raises(JaxcoagInputError, match="grouping"):
+        mc.MonteCarlo(grouping="equal_mass")
+    with pytest.raises(JaxcoagInputError, match="volume"):
+        mc.MonteCarlo(volume="const_n")
+    with pytest.raises(JaxcoagInputError, match="rates"):
+        mc.MonteCarlo(rates="full")
+    with pytest.raises(JaxcoagInputError, match="leftover"):
+        mc.MonteCarlo(leftover="random")
+    with pytest.raises(JaxcoagInputError, match="n_bins"):
+        mc.Distribution(n_bins=0)
+    with pytest.raises(JaxcoagInputError, match="count_groups"):
+        mc.Distribution(count_groups=0.5)
+    with pytest.raises(JaxcoagInputError, match="controller"):
+        mc.ConstantSpecies(controller="mass")
+    with pytest.raises(JaxcoagInputError, match="capacity >= 72"):  # equal-mass Ns* = 64 needs S >= 72
+        jc.evolve(kc, mc.MonteCarlo(n_particles=1e10, grouping=mc.EqualMass(), ns_target=64, capacity=70), mono, t,
+                  key=key)
+    with pytest.raises(JaxcoagInputError, match="t0"):
+        jc.evolve(kc, mc.MonteCarlo(n_particles=5), mono, t, key=key, t0=2.0)
+    with pytest.raises(JaxcoagInputError, match="outcome"):
+        jc.evolve(kc, mc.MonteCarlo(n_particles=5), mono, t, key=key, outcome="sticking")
+
+
+def test_flags_to_results_priority():
+    """Raw flags map to one RESULTS item: nonfinite > max_steps_reached > capacity_exceeded > stopped > zero_rate."""
+    names = jc.RESULT_NAMES
+    cases = {0: "successful", STATUS.ZERO_RATE: "zero_rate", STATUS.STOPPED | STATUS.ZERO_RATE: "stopped",
+             STATUS.CAPACITY | STATUS.STOPPED: "capacity_exceeded", STATUS.MAX_EVENTS | STATUS.CAPACITY: "max_steps_reached",
+             STATUS.NONFINITE | STATUS.MAX_EVENTS | STATUS.CAPACITY: "nonfinite", 31: "nonfinite"}
+    codes = np.asarray(flags_to_code(jnp.array(list(cases), jnp.int32)))
+    assert [names[c] for c in codes] == list(cases.values())
+
+
+def test_t0_shifts_the_start_and_continuation_is_bitwise():
+    """The initial condition sits at t0 (no event before it); a run continued from its result equals one
+    uninterrupted run bitwise (event keys from the base key and the event counter)."""
+    kc = K.Constant(1.0)
+    eng = mc.MonteCarlo(n_particles=19, capacity=27, stop=mc.Runaway(1e4))
+    mono = jc.Monodisperse(1.0)
+    key = jax.random.key(21)
+    # 4 output times, capacity 27 and the Runaway stop as in test_run_from_custom_initial_state: every run of
+    # this test (and of the common-layout test) reuses that compilation
+    full = jc.evolve(kc, eng, mono, jnp.array([10.25, 10.5, 11.0, 12.0]), key=key, t0=10.0)
+    first = jc.evolve(kc, eng, mono, jnp.array([10.0, 10.1, 10.25, 10.5]), key=key, t0=10.0)
+    assert int(first.n_events_snap[0]) == 0 and float(np.sum(np.asarray(first.g[0]))) == 19.0  # nothing happened at t0
+    # the same key from t0 = 0: the event sequence is the same, shifted by t0 (constant kernel, V fixed)
+    base = jc.evolve(kc, eng, mono, jnp.array([0.25, 0.5, 1.0, 2.0]), key=key)
+    np.testing.assert_array_equal(np.asarray(full.n_events_snap), np.asarray(base.n_events_snap))
+    assert float(full.final_state.t) == pytest.approx(float(base.final_state.t) + 10.0, rel=1e-12)
+    second = jc.evolve(kc, eng, first, jnp.array([10.75, 11.0, 11.5, 12.0]))
+    assert float(first.t[-1]) == 10.5 and int(full.n_events) > int(first.n_events) > 0
+    for f in ("m", "w", "z", "valid", "n_events_snap"):
+        x, y, z = (np.asarray(getattr(r, f)) for r in (full, first, second))
+        np.testing.assert_array_equal(y[2:], x[:2], err_msg=f)
+        np.testing.assert_array_equal(z[[1, 3]], x[2:], err_msg=f)
+    assert int(second.n_events) == int(full.n_events) and second.status == full.status
+    t_all = jnp.array([10.0, 10.5, 11.0, 12.0])
+    with pytest.raises(JaxcoagInputError, match="key differs"):
+        jc.evolve(kc, eng, first, t_all[2:], key=jax.random.key(22))
+    with pytest.raises(JaxcoagInputError, match="precedes"):
+        jc.evolve(kc, eng, first, t_all[:2] + 0.25)  # 10.25 < 10.5, the continued run's last output
+    with pytest.raises(JaxcoagInputError, match="capacity 27"):
+        jc.evolve(kc, mc.MonteCarlo(n_particles=19, capacity=50), first, t_all[2:])
 
 
 def test_run_from_custom_initial_state(tmp_path):
@@ -115,7 +192,7 @@ def test_run_from_custom_initial_state(tmp_path):
     round-trips through netCDF."""
     init = mc.initial_species([1.0, 2.0, 5.0], g=[10, 6, 3], V=2.0)
     t = jnp.array([0.0, 0.5, 2.0, 6.0])
-    r = mc.run(K.Constant(1.0), initial=init, t_out=t, key=jax.random.key(4), stop=mc.Runaway(1e4))
+    r = jc.evolve(K.Constant(1.0), mc.MonteCarlo(stop=mc.Runaway(1e4)), init, t, key=jax.random.key(4))
     M = 10 * 1.0 + 6 * 2.0 + 3 * 5.0
     np.testing.assert_array_equal(np.asarray(r.m[0, :3]), [1.0, 2.0, 5.0])
     np.testing.assert_array_equal(np.asarray(r.g[0, :3]), [10.0, 6.0, 3.0])
@@ -125,21 +202,30 @@ def test_run_from_custom_initial_state(tmp_path):
     ln_np = np.asarray(r.log_n_particles)
     assert ln_np[0] == pytest.approx(math.log(19.0)) and np.all(np.diff(ln_np) <= 0)
     # 19 particles, K = 1, V = 2: a single particle is left long after t = 6 only rarely; either way
-    # the run's status is OK or STOPPED (single particle) and t_stop is consistent with it
-    assert int(r.status) in (0, mc.STATUS.STOPPED)
-    assert np.isnan(float(r.t_stop)) == (int(r.status) == 0)
+    # the run's status is successful or stopped (single particle) and t_stop is consistent with it
+    assert r.status in (jc.RESULTS.successful, jc.RESULTS.stopped)
+    assert np.isnan(float(r.t_stop)) == (r.status == jc.RESULTS.successful)
 
     edges = 2.0 ** np.arange(0, 7)
     ds = r.to_xarray(attrs={"scene": "three-species box", "seed": 4}, edges=edges)
-    assert ds.sizes["time"] == 4 and ds.sizes["species"] == r.m.shape[-1] and ds.sizes["mass"] == 6
-    np.testing.assert_allclose(ds["mass_per_bin"].sum("mass").values, M / 2.0, rtol=1e-13)
+    assert ds.sizes["t"] == 4 and ds.sizes["species"] == r.m.shape[-1] and ds.sizes["m"] == 6
+    np.testing.assert_allclose(ds["mass_per_bin"].sum("m").values, M / 2.0, rtol=1e-13)
     np.testing.assert_allclose(ds["mass_per_bin"].values, np.asarray(r.mass_per_bin(edges)), rtol=0)
-    assert ds.attrs["run_mode"] == "const_v" and ds.attrs["run_kernel"] == "Constant"
-    assert ds.attrs["scene"] == "three-species box" and ds.attrs["status"] in ("OK", "STOPPED")
-    assert ds["m"].attrs["units"] == "g" and ds["V"].attrs["units"] == "cm3"
+    np.testing.assert_allclose(ds["m"].values, np.sqrt(edges[:-1] * edges[1:]), rtol=1e-15)
+    np.testing.assert_array_equal(ds["gel_mass"].values, 0.0)  # every species below 64 g
+    np.testing.assert_allclose(ds["mass_drift"].values, 0.0, atol=1e-14)  # constant V: mass exact
+    assert ds.attrs["run_mode"] == "const_v" and ds.attrs["run_kernel"] == "Constant" and ds.attrs["engine"] == "mc"
+    assert ds.attrs["scene"] == "three-species box" and ds.attrs["status"] in ("successful", "stopped")
+    assert ds["m_species"].attrs["units"] == "g" and ds["V"].attrs["units"] == "cm3"
+    # automatic edges: 10 per decade, covering every species (all mass inside, none in gel_mass)
+    auto = r.to_xarray()
+    e = auto["m_edge"].values
+    np.testing.assert_allclose(np.diff(np.log10(e)), 0.1, rtol=1e-9)
+    assert e[0] <= 1.0 and e[-1] > float(np.max(np.asarray(r.m)[np.asarray(r.valid)]))
+    np.testing.assert_allclose(auto["mass_per_bin"].sum("m").values, M / 2.0, rtol=1e-13)
     path = io.save_netcdf(ds, tmp_path / "mc.nc")
     back = io.load_netcdf(path)
-    for v in ("m", "log_g", "w", "z", "valid", "V", "M_tot", "n_events", "M_L1", "M_L2", "log_M2", "mass_per_bin"):
+    for v in ("m_species", "log_g", "w", "z", "valid", "V", "M_tot", "n_events", "M_L1", "M_L2", "log_M2", "mass_per_bin"):
         np.testing.assert_array_equal(back[v].values, ds[v].values, err_msg=v)
     assert back.attrs["run_capacity"] == ds.attrs["run_capacity"]
     with pytest.raises(JaxcoagInputError, match="one run"):
@@ -151,7 +237,8 @@ def test_run_from_custom_initial_state(tmp_path):
 def test_hand_result_to_xarray():
     r = _hand_result()
     ds = r.to_xarray()
-    assert ds.attrs["status"] == "STOPPED" and float(ds["t_stop"]) == 0.8
+    assert ds.attrs["status"] == "stopped" and int(ds["status"]) == jc.RESULT_NAMES.index("stopped")
+    assert ds["status"].attrs["status_name"] == "stopped" and float(ds["t_stop"]) == 0.8
     np.testing.assert_array_equal(ds["n_species"].values, [3, 3])
     assert ds["log_g"].values[0, 3] == -np.inf
     assert ds.attrs["run_capacity"] == 4
@@ -161,7 +248,53 @@ def test_hand_result_to_xarray():
 def test_const_n_initial_volume_fixes_density():
     """In const_n with a given V the controller keeps the initial mass density M_tot/V."""
     init = mc.initial_species([1.0, 4.0], g=[30, 5], V=5.0)
-    r = mc.run(K.Constant(1.0), initial=init, t_out=jnp.array([0.5, 3.0]), key=jax.random.key(1), mode="const_n",
-               capacity=80)
+    r = jc.evolve(K.Constant(1.0), mc.MonteCarlo(volume=mc.ConstantNumber(), capacity=80), init, jnp.array([0.5, 3.0]),
+                  key=jax.random.key(1))
     np.testing.assert_allclose(np.asarray(r.M_tot / r.V), 50.0 / 5.0, rtol=1e-12)
     assert int(r.n_dup) > 0
+
+
+def test_mc_and_binned_datasets_share_the_common_layout():
+    """to_xarray of a Monte Carlo run and of a binned run of the same problem (constant kernel, monodisperse
+    m0 = 1 g, rho_d = 1 g cm^-3) have the same coordinates (t, t_yr, m, m_edge, and a, St with a physical
+    kernel), the same common variables with the same dims and units, and both conserve the mass density
+    (sum over bins + gel = rho_d)."""
+    from jaxcoag._dataset import COMMON_COORDS, COMMON_VARIABLES
+    from jaxcoag.physics import gas as G
+
+    kc = K.Constant(1.0)
+    mono = jc.Monodisperse(1.0, rho_d=1.0)
+    t_out = jnp.array([0.0, 1.0, 2.0, 3.0])
+    grid = jc.MassGrid.log(10 ** -0.05, 10 ** 3.95, 10)  # 40 bins, centres 10^(k/10) g
+    rb = jc.evolve(kc, jc.Binned(grid), mono, t_out)
+    # the engine configuration of test_run_from_custom_initial_state (capacity 27, Runaway stop, 4 outputs):
+    # no new compilation
+    rm = jc.evolve(kc, mc.MonteCarlo(n_particles=19, capacity=27, stop=mc.Runaway(1e4)), mono, t_out,
+                   key=jax.random.key(5))
+    gas = G.mmsn_hayashi81(jc.constants.AU, 1e-4)
+    phys = jc.Scene(velocities=(jc.effects.Brownian(),)).kernel(gas, rho_s=1.6)
+    db = rb.to_xarray(kernel=phys)
+    dm = rm.to_xarray(kernel=phys, edges=grid)  # the binned run's grid: its edges and centres
+    assert db.attrs["engine"] == "binned" and dm.attrs["engine"] == "mc"
+    assert set(COMMON_COORDS) | {"a", "St"} <= set(db.coords)
+    assert set(db.coords) == set(dm.coords) - {"species"}
+    for c in db.coords:
+        assert db[c].dims == dm[c].dims and db[c].attrs.get("units") == dm[c].attrs.get("units"), c
+        np.testing.assert_array_equal(db[c].values, dm[c].values, err_msg=c)
+    for v in COMMON_VARIABLES:
+        assert db[v].dims == dm[v].dims and db[v].attrs["units"] == dm[v].attrs["units"], v
+    assert int(db["status"]) == 0 and dm.attrs["status"] in ("successful", "stopped")
+    for ds, rtol in ((db, 1e-6), (dm, 1e-13)):
+        tot = ds["mass_per_bin"].sum("m").values + ds["gel_mass"].values
+        np.testing.assert_allclose(tot, 1.0, rtol=rtol)
+        np.testing.assert_allclose(ds["mass_drift"].values, 0.0, atol=rtol)
+    # the t_out[0] = t0 snapshot is the initial condition in both: all mass in the bin of m0 = 1 g
+    i0 = int(np.argmin(np.abs(np.log(db["m"].values))))
+    np.testing.assert_allclose([db["mass_per_bin"].values[0, i0], dm["mass_per_bin"].values[0, i0]], 1.0, rtol=1e-12)
+    # the shared accessors of the result protocol: m^2 f = rho_b / dln m_b, and the peak at t0 is m0 = 1 g
+    for r in (rb, rm):
+        np.testing.assert_allclose(np.asarray(r.m2f(grid.edges)),
+                                   np.asarray(r.mass_per_bin(grid.edges)) / np.diff(np.log(grid.edges)), rtol=1e-12)
+        assert float(r.mass_peak(grid.edges)[0]) == pytest.approx(1.0, rel=1e-12)
+    # automatic MC edges (10 per decade) hold all the mass: M1 from the bins equals the moment M1 = rho_d
+    np.testing.assert_allclose(np.asarray(rm.mass_per_bin()).sum(-1), np.asarray(rm.moments(1.0)), rtol=1e-13)

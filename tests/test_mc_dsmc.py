@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+import jaxcoag as jc
 from jaxcoag import kernels as K
 from jaxcoag import mc
 
@@ -25,8 +26,11 @@ K0S = np.ones(R)
 K0S[:3] = [0.5, 1.0, 2.0]  # members 0-2 check the kernel-parameter vmap; 3.. are the ensemble
 
 
+MONO = jc.Monodisperse(1.0)
+
+
 def _const_run(k0, t_out, key):
-    return mc.run(K.Constant(k0), n_particles=N0, t_out=t_out, key=key, capacity=N0 + 8)
+    return jc.evolve(K.Constant(k0), mc.MonteCarlo(n_particles=N0, capacity=N0 + 8), MONO, t_out, key=key, throw=False)
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +43,8 @@ def const_ensemble():
 
 def _ensemble(kernel, seed, n=N0, runs=R, **kw):
     keys = jax.random.split(jax.random.key(seed), runs)
-    f = jax.vmap(lambda k: mc.run(kernel, n_particles=n, t_out=T_OUT, key=k, capacity=n + 8, **kw))
+    eng = mc.MonteCarlo(n_particles=n, capacity=n + 8, **kw)
+    f = jax.vmap(lambda k: jc.evolve(kernel, eng, MONO, T_OUT, key=k, throw=False))
     return f(keys)
 
 
@@ -89,7 +94,7 @@ def _constant_kernel_exact(t_eval, n0=N0):
 def test_constant_kernel_exact_finite_N(const_ensemble):
     full = const_ensemble[3]
     res = jax.tree_util.tree_map(lambda x: x[3:], full)
-    assert np.all(np.asarray(res.status) == 0)
+    assert np.all(np.asarray(res.status == jc.RESULTS.successful))
     EN, Enk = _constant_kernel_exact(np.asarray(T_OUT)[1:])
     # reference values of the master equation (N0 = 40, t = 1.5; independent evaluation)
     assert EN[1] == pytest.approx(23.131, abs=1e-3) and Enk[1, 1] == pytest.approx(13.284, abs=1e-3)
@@ -106,7 +111,7 @@ def test_constant_kernel_exact_finite_N(const_ensemble):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("rates", ["incremental", "full"])
+@pytest.mark.parametrize("rates", [mc.IncrementalRates(), mc.FullRates()])
 def test_sum_kernel_binomial_N(rates):
     """N(t) - 1 ~ Binomial(N0 - 1, e^{-t/2}) for K = (m_i+m_j)/2 (the total rate depends on n only); both
     rate designs."""
@@ -163,11 +168,11 @@ def test_reproducibility_and_vmap(const_ensemble):
 
 @pytest.mark.slow
 def test_run_under_user_jit():
-    """jax.jit(run)(key) == run(key) (run is itself jitted; wrapping it must not change results)."""
+    """jax.jit(evolve)(key) == evolve(key) (the advance is itself jitted; wrapping it must not change results)."""
     kern = K.Constant(1.0)
-    kw = dict(n_particles=N0, t_out=T_OUT, capacity=N0 + 8)
+    eng = mc.MonteCarlo(n_particles=N0, capacity=N0 + 8)
     key = jax.random.key(3)
-    j = jax.jit(lambda k: mc.run(kern, key=k, **kw))(key)
-    a = mc.run(kern, key=key, **kw)
+    j = jax.jit(lambda k: jc.evolve(kern, eng, MONO, T_OUT, key=k, throw=False))(key)
+    a = jc.evolve(kern, eng, MONO, T_OUT, key=key)
     np.testing.assert_array_equal(np.asarray(j.m), np.asarray(a.m))
     np.testing.assert_array_equal(np.asarray(j.w), np.asarray(a.w))

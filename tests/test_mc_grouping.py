@@ -12,14 +12,24 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxcoag as jc
 from jaxcoag import analytic
 from jaxcoag import kernels as K
 from jaxcoag import mc
 
+MONO = jc.Monodisperse(1.0)
 
-def _ens(kernel, seed, runs, **kw):
+
+def _ens(kernel, seed, runs, t_out, outcome=None, **kw):
     keys = jax.random.split(jax.random.key(seed), runs)
-    return jax.vmap(lambda k: mc.run(kernel, key=k, **kw))(keys)
+    eng = mc.MonteCarlo(**kw)
+    return jax.vmap(lambda k: jc.evolve(kernel, eng, MONO, t_out, key=k, outcome=outcome, throw=False))(keys)
+
+
+def _ok(res, *items):
+    """Every member's status is one of ``items`` (default: successful)."""
+    items = items or (jc.RESULTS.successful,)
+    return bool(np.all(np.any([np.asarray(res.status == it) for it in items], axis=0)))
 
 
 def _invariants(res):
@@ -58,13 +68,13 @@ SUM_NS = 100
 @pytest.fixture(scope="module")
 def sum_equal_mass():
     return _ens(K.Sum(0.5), 101, SUM_R, n_particles=1e30, t_out=jnp.asarray(SUM_T),
-                grouping="equal_mass", ns_target=SUM_NS, f_eps=1e-3)
+                grouping=mc.EqualMass(), ns_target=SUM_NS, f_eps=1e-3)
 
 
 def test_sum_kernel_equal_mass_moments(sum_equal_mass):
     """Sum kernel K = (m_i+m_j)/2, const-V equal-mass, N = 1e30: M0 = e^{-t/2}, M2 = e^t (Table 5.1)."""
     res = sum_equal_mass
-    assert np.all(np.asarray(res.status) == 0)
+    assert _ok(res)
     _invariants(res)
     _check_moments(res, SUM_T, np.exp(-SUM_T / 2), np.exp(SUM_T), bias=0.05)
     # mass conserved to rounding (relative 1e-12, MC hazard 9) in every snapshot
@@ -94,9 +104,9 @@ def test_sum_kernel_equal_mass_mass_per_bin(sum_equal_mass):
 def test_product_kernel_distribution_method():
     """Product kernel, const-V, distribution method, N = 1e20: pre-gel M0 = 1 - t/2, M2 = 1/(1-t)."""
     times = np.array([0.0, 0.4, 0.7])
-    res = _ens(K.Product(1.0), 202, 4, n_particles=1e20, t_out=jnp.asarray(times), grouping="distribution",
+    res = _ens(K.Product(1.0), 202, 4, n_particles=1e20, t_out=jnp.asarray(times), grouping=mc.Distribution(),
                ns_target=200, f_eps=1e-3)
-    assert np.all(np.asarray(res.status) == 0)
+    assert _ok(res)
     _invariants(res)
     _check_moments(res, times, 1 - times / 2, 1 / (1 - times), bias=0.05)
     lmass = jax.nn.logsumexp(jnp.where(res.valid, res.log_g + res.logm, -jnp.inf), axis=-1)
@@ -108,9 +118,9 @@ def test_constant_kernel_const_n():
     """Constant kernel, constant-N (Smith-Matsoukas), Np = 500 up to t = 1e3 (GF ~ 500):
     M0 = 1/(1+t/2), M2 = 1+t, and M_tot/V = rho_d exactly (U9)."""
     times = np.array([0.0, 1.0, 10.0, 100.0, 1000.0])
-    res = _ens(K.Constant(1.0), 303, 4, n_particles=500, t_out=jnp.asarray(times), mode="const_n",
+    res = _ens(K.Constant(1.0), 303, 4, n_particles=500, t_out=jnp.asarray(times), volume=mc.ConstantNumber(),
                capacity=520)
-    assert np.all(np.asarray(res.status) == 0)
+    assert _ok(res)
     np.testing.assert_allclose(np.asarray(res.M_tot / res.V), 1.0, rtol=1e-12)
     np.testing.assert_allclose(np.asarray(res.moments(1.0)), 1.0, rtol=1e-12)
     # number of particles stays exactly 500
@@ -123,9 +133,9 @@ def test_sum_kernel_const_ns_equal_mass():
     """Sum kernel, constant-Ns with the equal-mass zoom (m* = m_p) and the mass controller:
     follows e^t well past the point where a fixed-N DSMC fails (thesis Fig. 5.4a, CI-scale)."""
     times = np.array([0.0, 5.0, 10.0])
-    res = _ens(K.Sum(0.5), 404, 4, n_particles=200, t_out=jnp.asarray(times), mode="const_ns",
-               grouping="equal_mass", ns_target=200, f_eps=1e-3, capacity=2048)
-    assert np.all(np.asarray(res.status) == 0)
+    res = _ens(K.Sum(0.5), 404, 4, n_particles=200, t_out=jnp.asarray(times), volume=mc.ConstantSpecies(),
+               grouping=mc.EqualMass(), ns_target=200, f_eps=1e-3, capacity=2048)
+    assert _ok(res)
     _invariants(res)
     np.testing.assert_allclose(np.asarray(res.moments(1.0)), 1.0, rtol=1e-10)
     # the lag of m_p at small Ns* seen in our prototype (M2/e^t ~ 0.55-0.8): allow 0.5
@@ -137,8 +147,8 @@ def test_catastrophic_fragmentation_outcome():
     """§5.3.4 rule: no particle survives above m_frag; mass conserved; monomers are replenished."""
     times = np.array([0.0, 5.0, 20.0])
     res = _ens(K.Sum(0.5), 505, 2, n_particles=400, t_out=jnp.asarray(times), capacity=408,
-               outcome=mc.CatastrophicFragmentation(m_frag=32.0, m_mono=1.0))
-    assert np.all(np.asarray(res.status) == 0)
+               outcome=jc.outcomes.ShatterAbove(m_frag=32.0, m_mono=1.0))
+    assert _ok(res)
     v = np.asarray(res.valid)
     assert np.all(np.asarray(res.m)[v] <= 32.0)
     np.testing.assert_array_equal(np.sum(np.asarray(res.g) * np.asarray(res.m), -1), 400.0)
@@ -151,10 +161,10 @@ def test_catastrophic_fragmentation_outcome():
 def test_incremental_and_full_rates_agree_grouped():
     """Design B (incremental rows) and design A (full recompute) give the same statistics."""
     times = np.array([0.0, 3.0])
-    kw = dict(n_particles=1e20, t_out=jnp.asarray(times), grouping="equal_mass", ns_target=64,
+    kw = dict(n_particles=1e20, t_out=jnp.asarray(times), grouping=mc.EqualMass(), ns_target=64,
               f_eps=1e-2, capacity=512)
-    a = _ens(K.Sum(0.5), 606, 6, rates="incremental", **kw)
-    b = _ens(K.Sum(0.5), 607, 6, rates="full", **kw)
+    a = _ens(K.Sum(0.5), 606, 6, rates=mc.IncrementalRates(), **kw)
+    b = _ens(K.Sum(0.5), 607, 6, rates=mc.FullRates(), **kw)
     for p in (0.0, 2.0):
         xa = np.asarray(a.log_moments(p))[:, 1]
         xb = np.asarray(b.log_moments(p))[:, 1]
@@ -167,12 +177,12 @@ def test_stochastic_leftover_limits_species_growth():
     """leftover="stochastic" (MC hazard 3): fewer species than the demagnify cascade, unbiased
     mass (the simulated mass fluctuates around the true value) and the same moments."""
     times = np.array([0.0, 5.0, 10.0])
-    kw = dict(n_particles=1e30, t_out=jnp.asarray(times), grouping="equal_mass", ns_target=100, f_eps=1e-3)
+    kw = dict(n_particles=1e30, t_out=jnp.asarray(times), grouping=mc.EqualMass(), ns_target=100, f_eps=1e-3)
     sto = _ens(K.Sum(0.5), 707, 4, leftover="stochastic", **kw)
     det = _ens(K.Sum(0.5), 708, 4, **kw)
-    assert np.all(np.asarray(sto.status) == 0)
+    assert _ok(sto)
     # the demagnify cascade may exhaust the default capacity 8 Ns* by t = 10 (flagged, not corrupt)
-    assert np.all((np.asarray(det.status) & ~mc.STATUS.CAPACITY) == 0)
+    assert _ok(det, jc.RESULTS.successful, jc.RESULTS.capacity_exceeded)
     _invariants(sto)
     assert np.asarray(sto.n_species)[:, -1].mean() < 0.7 * np.asarray(det.n_species)[:, -1].mean()
     # M_tot tracks the simulated mass exactly; its mean stays at the initial mass (z-score)
@@ -222,17 +232,17 @@ def test_count_nodes_tail_count_zoom():
     assert xp[4] > xp[3] and fp[4] == fp[3]  # invalid slot: a flat node above the heaviest
 
 
-RUNAWAY_KW = dict(grouping="distribution", ns_target=200, f_eps=1e-2, capacity=512, count_groups=10,
-                  tail_events=16, tail_wmax=1e6)
+RUNAWAY_KW = dict(grouping=mc.Distribution(count_groups=10, tail_events=16, tail_wmax=1e6), ns_target=200, f_eps=1e-2,
+                  capacity=512)
 
 
 def test_runaway_refinements_keep_the_sum_kernel_exact():
     """count_groups + tail_events only change z: the sum-kernel moments (M0 = e^{-t/2}, M2 = e^t)
     and exact mass conservation hold as for the thesis distribution method (N = 1e20)."""
     times = np.array([0.0, 1.0, 2.0])
-    kw = dict(RUNAWAY_KW, capacity=256, tail_wmax=1e3)
+    kw = dict(RUNAWAY_KW, capacity=256, grouping=mc.Distribution(count_groups=10, tail_events=16, tail_wmax=1e3))
     res = _ens(K.Sum(0.5), 311, 6, n_particles=1e20, t_out=jnp.asarray(times), **kw)
-    assert np.all(np.asarray(res.status) == 0)
+    assert _ok(res)
     _invariants(res)
     mass = np.sum(np.asarray(res.g) * np.asarray(res.m), axis=-1)
     np.testing.assert_allclose(mass, 1e20, rtol=1e-12)
@@ -250,12 +260,12 @@ def test_runaway_refinements_resolve_the_seed_tail():
     kern = K.PowerProduct(1.0, 2.0)
     keys = jax.random.split(jax.random.key(57), 3)
     t_end = jnp.array([1.0])
-    run = lambda k, **kw: mc.run(kern, n_particles=1e20, t_out=t_end, key=k, mode="const_v",  # noqa: E731
-                                 stop=mc.Runaway(1e4), max_events=200000, **kw)
-    ref = jax.vmap(lambda k: run(k, grouping="distribution", ns_target=200, f_eps=1e-2, capacity=400))(keys)
+    run = lambda k, **kw: jc.evolve(kern, mc.MonteCarlo(n_particles=1e20, stop=mc.Runaway(1e4), max_events=200000,  # noqa: E731
+                                                        **kw), MONO, t_end, key=k, throw=False)
+    ref = jax.vmap(lambda k: run(k, grouping=mc.Distribution(), ns_target=200, f_eps=1e-2, capacity=400))(keys)
     new = jax.vmap(lambda k: run(k, **RUNAWAY_KW))(keys)
     for r in (ref, new):
-        assert np.all(np.asarray(r.status) == mc.STATUS.STOPPED)
+        assert _ok(r, jc.RESULTS.stopped)
     t_ref, t_new = np.asarray(ref.t_stop), np.asarray(new.t_stop)
     bound = A.runaway_time_chain(1e20, 2.0)["mean"]
     assert t_new.max() < t_ref.min(), (t_new, t_ref)
@@ -264,8 +274,8 @@ def test_runaway_refinements_resolve_the_seed_tail():
 
 def test_count_groups_one_is_on():
     """G_c = 1 (ln G_c = 0) switches the refinement on (it once meant "off"); mass stays exact."""
-    res = mc.run(K.Constant(1.0), n_particles=1e6, t_out=jnp.array([0.5]), key=jax.random.key(2),
-                 grouping="distribution", ns_target=50, capacity=64, count_groups=1)
-    assert int(res.status) == 0
+    res = jc.evolve(K.Constant(1.0), mc.MonteCarlo(n_particles=1e6, grouping=mc.Distribution(count_groups=1), ns_target=50,
+                                                   capacity=64), MONO, jnp.array([0.5]), key=jax.random.key(2))
+    assert res.status == jc.RESULTS.successful
     assert res.final_state.zoom_xp.shape == (20 + 64,)
     np.testing.assert_allclose(float(np.sum(np.asarray(res.g) * np.asarray(res.m))), 1e6, rtol=1e-12)

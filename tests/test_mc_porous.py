@@ -10,17 +10,20 @@ the CCA / PCA limits of thesis eqs. 2.13-2.19 (§2.2.4) through the adapter; a p
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxcoag as jc
 from jaxcoag import Scene, constants as C, effects as E, mc
 from jaxcoag._validate import JaxcoagInputError
-from jaxcoag.mc.recipe_outcome import RainOutKernel, RecipeOutcome, o07_recipe, rainout_summary
+from jaxcoag.mc import RainOutKernel, rainout_summary
+from jaxcoag.outcomes import O07Recipe, RecipeOutcome
 from jaxcoag.physics import gas as G
 from jaxcoag.physics.contact import Material
-from jaxcoag.physics.outcomes import o07_outcome
+from jaxcoag.physics.ormel07 import o07_outcome
 
 MAT = Material.ch2_quartz()
 M0 = float(MAT.m0)
@@ -35,9 +38,9 @@ def _call(out, mi, pi, mj, pj, nc=1.0, key=KEY):
                   jnp.asarray(float(nc)), key)
 
 
-@jax.jit
+@eqx.filter_jit  # the outcome may hold a plain-function recipe (static)
 def _jcall(out, mi, pi, mj, pj, nc, key):
-    return out(mi, jnp.log(mi), pi[None], mj, jnp.log(mj), pj[None], nc, jnp.log(nc), key)
+    return out.products(mi, jnp.log(mi), pi[None], mj, jnp.log(mj), pj[None], nc, jnp.log(nc), key)
 
 
 PAIRS = [(1e4 * M0, 30.0, 10 * M0, 5.0), (1e8 * M0, 80.0, 1e3 * M0, 40.0), (1e12 * M0, 80.0, 1e12 * M0, 60.0),
@@ -46,7 +49,7 @@ PAIRS = [(1e4 * M0, 30.0, 10 * M0, 5.0), (1e8 * M0, 80.0, 1e3 * M0, 40.0), (1e12
 
 @pytest.mark.parametrize("mi, pi, mj, pj", PAIRS)
 def test_single_collision_is_the_physics_recipe_with_the_kernel_dv(mi, pi, mj, pj):
-    out = RecipeOutcome(KP, MAT)
+    out = RecipeOutcome(O07Recipe(), MAT).bind(KP)
     assert out.n_products == 1
     P = _call(out, mi, pi, mj, pj)
     dv = jnp.sqrt(KP.relative_velocity2(mi, mj, jnp.array([pi]), jnp.array([pj])))
@@ -59,7 +62,7 @@ def test_single_collision_is_the_physics_recipe_with_the_kernel_dv(mi, pi, mj, p
 @pytest.mark.parametrize("mi, pi, mj, pj", PAIRS[:2] + [(1e12 * M0, 80.0, 1e6 * M0, 40.0)])
 @pytest.mark.parametrize("nc", [8, 64])
 def test_group_event_equals_sequential_collisions(mi, pi, mj, pj, nc):
-    out = RecipeOutcome(KP, MAT)
+    out = RecipeOutcome(O07Recipe(), MAT).bind(KP)
     P = _call(out, mi, pi, mj, pj, nc)
     m, p = mi, pi
     for _ in range(nc):
@@ -74,8 +77,8 @@ def test_group_event_equals_sequential_collisions(mi, pi, mj, pj, nc):
 
 def test_cca_and_pca_limits_through_the_adapter():
     hs = dict(restr_factor=1e250)  # force hit-and-stick (no compaction) whatever Delta v
-    cca0 = RecipeOutcome(KB, MAT, o07_recipe(B=0.0, **hs))
-    cca1 = RecipeOutcome(KB, MAT, o07_recipe(B=1.0, **hs))
+    cca0 = RecipeOutcome(O07Recipe(B=0.0, **hs), MAT).bind(KB)
+    cca1 = RecipeOutcome(O07Recipe(B=1.0, **hs), MAT).bind(KB)
     m, p0, p1 = M0, 1.0, 1.0
     vals = {}
     for k in range(1, 21):
@@ -88,7 +91,7 @@ def test_cca_and_pca_limits_through_the_adapter():
     np.testing.assert_allclose(vals[2 ** 20] / vals[2 ** 19], 1.342573, rtol=2e-4)
     # PCA by group events: one aggregate sweeps n_c = f_eps N monomers per event (closed-form update)
     for B, N_end, f_eps, ref, rtol in [(0.0, 2e5, 1e-2, 1.42501, 2e-3), (1.0, 1e3, 1e-3, 9.0442, 1e-2)]:
-        out = RecipeOutcome(KB, MAT, o07_recipe(B=B, **hs))
+        out = RecipeOutcome(O07Recipe(B=B, **hs), MAT).bind(KB)
         N, p = 1.0, 1.0
         while N < N_end - 0.5:
             nc = max(1.0, min(math.floor(f_eps * N), N_end - N))
@@ -99,13 +102,13 @@ def test_cca_and_pca_limits_through_the_adapter():
 
 def test_two_remnants_misses_and_fragments_conserve_mass():
     # a recipe with bounce probability, misses and a power-law fragment fraction (all from Outcome)
-    from jaxcoag.physics.outcomes import Outcome
+    from jaxcoag.physics.outcome import Outcome
 
-    def recipe(m1, psi1, m2, psi2, dv, mat):
+    def recipe(m1, psi1, m2, psi2, dv, mat, width=0.0):
         return Outcome.build(eff=0.7, p_two=0.4, split=m1 / (m1 + m2), f_pwl=0.25, q=-1.8, m_lo=mat.m0,
                              m_hi=0.25 * (m1 + m2), psi_one=0.5 * (psi1 + psi2), psi_a=psi1, psi_b=psi2)
 
-    out = RecipeOutcome(KP, MAT, recipe, remnants=2, n_frag=6)
+    out = RecipeOutcome(recipe, MAT, remnants=2, n_frag=6).bind(KP)
     assert out.n_products == 8
     kinds = set()
     for s in range(40):
@@ -126,11 +129,14 @@ def test_constructor_errors_say_what_to_change():
     from jaxcoag.kernels import Constant
 
     with pytest.raises(JaxcoagInputError, match="relative velocity"):
-        RecipeOutcome(Constant(1.0), MAT)
+        RecipeOutcome(O07Recipe(), MAT).check(Constant(1.0), "mc")
+    with pytest.raises(JaxcoagInputError, match="relative velocity"):  # refused by evolve before any work
+        jc.evolve(Constant(1.0), mc.MonteCarlo(n_particles=10), jc.Monodisperse(M0), jnp.array([1.0]), key=KEY,
+                  outcome=RecipeOutcome(O07Recipe(), MAT))
     with pytest.raises(JaxcoagInputError, match="remnants must be 1 or 2"):
-        RecipeOutcome(KP, MAT, remnants=3)
+        RecipeOutcome(O07Recipe(), MAT, remnants=3)
     with pytest.raises(JaxcoagInputError, match="Material"):
-        RecipeOutcome(KP, 3.0)
+        RecipeOutcome(O07Recipe(), 3.0)
 
 
 @pytest.fixture(scope="module")
@@ -142,17 +148,18 @@ def brownian_runs():
     t_coll = 1.0 / (rho_d / M0 * K0)
     tau_rain = float(KB.particles(jnp.asarray(12 * M0), jnp.array([3.0])).tau_f)
     K = RainOutKernel(KB, tau_rain)
-    out = RecipeOutcome(K, MAT, o07_recipe(B=0.0))
+    out = RecipeOutcome(O07Recipe(B=0.0), MAT)
     t_out = jnp.array([0.5, 2.0, 8.0, 32.0, 128.0]) * t_coll
-    f = jax.vmap(lambda k: mc.run(K, n_particles=float(N), m0=M0, rho_d=rho_d, t_out=t_out, key=k, outcome=out,
-                                  struct0=jnp.ones((1,)), capacity=N + 8))
+    # struct0 defaults to psi = 1 (compact monomers) for the porous kernel (n_struct = 1)
+    eng = mc.MonteCarlo(n_particles=float(N), capacity=N + 8)
+    f = jax.vmap(lambda k: jc.evolve(K, eng, jc.Monodisperse(M0, rho_d), t_out, key=k, outcome=out, throw=False))
     keys = jax.random.split(jax.random.key(11), 2)
-    return K, N, f(keys), keys, out, t_out, rho_d
+    return K, N, f(keys), keys, out, t_out, rho_d, eng
 
 
 def test_porous_mc_run_conserves_mass_and_respects_fractal_bounds(brownian_runs):
-    K, N, res, _, _, _, _ = brownian_runs
-    assert np.all(np.asarray(res.status) == 0)
+    K, N, res, _, _, _, _, _ = brownian_runs
+    assert np.all(np.asarray(res.status == jc.RESULTS.successful))
     g = res.w * 2.0 ** res.z
     tot = jnp.sum(jnp.where(res.valid, g * res.m, 0.0), axis=-1)
     np.testing.assert_allclose(np.asarray(tot), N * M0, rtol=1e-12)    # active + rained, exact
@@ -170,7 +177,7 @@ def test_porous_mc_run_conserves_mass_and_respects_fractal_bounds(brownian_runs)
 
 
 def test_rain_out_accounting(brownian_runs):
-    K, N, res, _, _, t_out, _ = brownian_runs
+    K, N, res, _, _, t_out, _, _ = brownian_runs
     s = rainout_summary(res, K)
     f = np.asarray(s["f_rain"])
     assert np.all(np.diff(f, axis=-1) >= -1e-15) and np.all(f[:, -1] > 0.05)  # rain-out happened
@@ -206,8 +213,7 @@ def test_rain_out_accounting(brownian_runs):
 
 @pytest.mark.slow
 def test_vmap_member_equals_single_run(brownian_runs):
-    K, N, res, keys, out, t_out, rho_d = brownian_runs
-    one = mc.run(K, n_particles=float(N), m0=M0, rho_d=rho_d, t_out=t_out, key=keys[1], outcome=out,
-                 struct0=jnp.ones((1,)), capacity=N + 8)
+    K, N, res, keys, out, t_out, rho_d, eng = brownian_runs
+    one = jc.evolve(K, eng, jc.Monodisperse(M0, rho_d), t_out, key=keys[1], outcome=out)
     np.testing.assert_array_equal(np.asarray(one.m), np.asarray(res.m[1]))
     np.testing.assert_array_equal(np.asarray(one.psi), np.asarray(res.psi[1]))

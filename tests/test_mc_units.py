@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxcoag as jc
 from jaxcoag import kernels as K
 from jaxcoag import mc
 from jaxcoag._validate import JaxcoagInputError
@@ -147,27 +148,30 @@ def test_run_input_validation():
     t = jnp.array([0.0, 1.0])
     key = jax.random.key(0)
     kc = K.Constant(1.0)
+    mono = jc.Monodisperse(1.0)
     with pytest.raises(JaxcoagInputError, match="n_particles"):
-        mc.run(kc, n_particles=-5, t_out=t, key=key)
+        mc.MonteCarlo(n_particles=-5)
     with pytest.raises(JaxcoagInputError, match="m0"):
-        mc.run(kc, n_particles=10, m0=0.0, t_out=t, key=key)
+        jc.Monodisperse(0.0)
     with pytest.raises(JaxcoagInputError, match="rho_d"):
-        mc.run(kc, n_particles=10, rho_d=-1.0, t_out=t, key=key)
+        jc.Monodisperse(1.0, rho_d=-1.0)
     with pytest.raises(JaxcoagInputError, match="strictly increasing"):
-        mc.run(kc, n_particles=10, t_out=jnp.array([0.0, 2.0, 1.0]), key=key)
-    with pytest.raises(JaxcoagInputError, match="mode"):
-        mc.run(kc, n_particles=10, t_out=t, key=key, mode="constant_volume")
+        jc.evolve(kc, mc.MonteCarlo(n_particles=10), mono, jnp.array([0.0, 2.0, 1.0]), key=key)
+    with pytest.raises(JaxcoagInputError, match="volume"):
+        mc.MonteCarlo(volume="constant_volume")
     with pytest.raises(JaxcoagInputError, match="grouping"):
-        mc.run(kc, n_particles=10, t_out=t, key=key, grouping="equalmass")
+        mc.MonteCarlo(grouping="equalmass")
     with pytest.raises(JaxcoagInputError, match="2\\^53"):
-        mc.run(kc, n_particles=1e30, t_out=t, key=key)
+        jc.evolve(kc, mc.MonteCarlo(n_particles=1e30), mono, t, key=key)
     with pytest.raises(JaxcoagInputError, match="1e300"):
-        mc.run(kc, n_particles=1e200, m0=1e120, t_out=t, key=key, grouping="equal_mass")
+        jc.evolve(kc, mc.MonteCarlo(n_particles=1e200, grouping=mc.EqualMass()), jc.Monodisperse(1e120), t, key=key)
 
 
 def test_status_names():
-    assert mc.status_names(0) == []
-    assert mc.status_names(mc.STATUS.CAPACITY | mc.STATUS.MAX_EVENTS) == ["CAPACITY", "MAX_EVENTS"]
+    from jaxcoag.mc.state import STATUS, flag_names
+
+    assert flag_names(0) == []
+    assert flag_names(STATUS.CAPACITY | STATUS.MAX_EVENTS) == ["CAPACITY", "MAX_EVENTS"]
 
 
 def _collide_jit(*args):
@@ -190,12 +194,13 @@ def _hand_state(m, w, z):
                  M_tot=jnp.array(1.0), t=jnp.array(0.0), n_events=jnp.array(0), n_since_refresh=jnp.array(0),
                  dirty=jnp.array(False), rezoom=jnp.array(False), log_mstar=jnp.array(0.0), zref=jnp.array(0.0),
                  zoom_xp=jnp.arange(3.0), zoom_fp=jnp.zeros(3), key=jax.random.key(0), k_out=jnp.array(0),
-                 status=jnp.array(0), done=jnp.array(False), n_dup=jnp.array(0), n_merge=jnp.array(0), snaps=None)
+                 status=jnp.array(0), done=jnp.array(False), n_dup=jnp.array(0), n_merge=jnp.array(0),
+                 log_rho_d=jnp.array(0.0), log_mlo=jnp.array(0.0), snaps=None)
     R = sys.modules["jaxcoag.mc.run"]
     cfg = R._Cfg(mode="const_v", grouping=None, capacity=S, n_snap=1, n_struct=0, n_prod=1, rates="full",
                  n_refresh=1, rounding="ceil", controller="species", d_max=1, d_up=1, n_bins=3, p_protect=0,
                  weighting="mass", dedupe=True, n_rezoom=1)
-    p = dict(outcome=mc.PerfectSticking(), log2_feps=jnp.log2(1.0))
+    p = dict(outcome=jc.outcomes.Sticking(), log2_feps=jnp.log2(1.0))
     return R, cfg, p, st
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jaxcoag._validate import JaxcoagInputError
-from jaxcoag.physics import outcomes as O
+from jaxcoag.physics import dominik_tielens as DT, ormel07 as O07, ormel08 as O08, outcome as OC, wada07 as W
 from jaxcoag.physics.contact import Material, jkr_delta_c
 from jaxcoag.physics.porosity import psi_hit_and_stick
 
@@ -18,26 +18,26 @@ def test_lens_area_G3():
     a1 = jnp.array([1.0, 1.0, 2.0, 2.0, 2.0])
     a2 = jnp.array([1.0, 1.0, 1.0, 1.0, 1.0])
     b = jnp.array([1.0, 0.5, 2.0, 1.0, 2.9])
-    A = np.asarray(O.lens_area(a1, a2, b))
+    A = np.asarray(O08.lens_area(a1, a2, b))
     np.testing.assert_allclose(A, [1.22837, 2.15211, 1.40307, np.pi, 0.048318], rtol=1e-4)
     np.testing.assert_allclose(A[0] / np.pi, 0.39100, rtol=1e-4)
     np.testing.assert_allclose([A[2] / (4 * np.pi), A[2] / np.pi], [0.11165, 0.44661], rtol=1e-4)
-    assert float(O.lens_area(1.0, 1.0, 2.5)) == 0.0
+    assert float(O08.lens_area(1.0, 1.0, 2.5)) == 0.0
     # continuity at b = |a1 - a2| and b = a1 + a2
-    np.testing.assert_allclose(float(O.lens_area(2.0, 1.0, 1.0 + 1e-9)), np.pi, rtol=1e-6)
-    assert abs(float(O.lens_area(2.0, 1.0, 3.0 - 1e-9))) < 1e-9
+    np.testing.assert_allclose(float(O08.lens_area(2.0, 1.0, 1.0 + 1e-9)), np.pi, rtol=1e-6)
+    assert abs(float(O08.lens_area(2.0, 1.0, 3.0 - 1e-9))) < 1e-9
 
 
 def test_f_comp_o08_M6_R7():
     M = Material.ch4_silicate()
-    f = np.asarray(O.f_comp_o08(1.0, 1.0, jnp.array([10.0, 50.0, 55.0, 295.0]), M))
+    f = np.asarray(O08.f_comp_o08(1.0, 1.0, jnp.array([10.0, 50.0, 55.0, 295.0]), M))
     np.testing.assert_allclose(f, [0.009186, 0.22965, 0.27787, 7.994], rtol=2e-4)
     # coefficient 3.674e-2 (m_mu^2/(m1 m2)) at 10 cm/s; depends on the mass ratio only
     np.testing.assert_allclose(4 * f[0], 0.036744, rtol=1e-4)
-    np.testing.assert_allclose(float(O.f_comp_o08(1e-3, 1e-3, 10.0, M)), f[0], rtol=1e-12)
+    np.testing.assert_allclose(float(O08.f_comp_o08(1e-3, 1e-3, 10.0, M)), f[0], rtol=1e-12)
     # stick/bounce rule: F_av = 0.25 for two (f_d = f_p = 0.5, f_geo = 1) compounds
     assert f[1] <= 0.25 < f[2]
-    np.testing.assert_allclose(float(O.o08_frag_flag(1.0, 1.0, 295.0, M)), 7.994 / 8, rtol=2e-4)
+    np.testing.assert_allclose(float(O08.o08_frag_flag(1.0, 1.0, 295.0, M)), 7.994 / 8, rtol=2e-4)
 
 
 def test_o08_compounds_R7_R8():
@@ -46,12 +46,12 @@ def test_o08_compounds_R7_R8():
     M = Material.ch4_silicate()
     phi_pd = 0.15 * float(phi_dust(10 ** (2 / 0.95)))
     np.testing.assert_allclose(phi_pd, 0.019114, rtol=1e-4)
-    c = O.Compound(m=1.0, f_d=0.5, f_p=0.5, phi_pd=phi_pd)
-    V = float(O.compound_volume(c))
+    c = O08.Compound(m=1.0, f_d=0.5, f_p=0.5, phi_pd=phi_pd)
+    V = float(O08.compound_volume(c))
     np.testing.assert_allclose([V, (3 * V / (4 * np.pi)) ** (1 / 3)], [4.77897, 1.04492], rtol=1e-5)
     # stick at 50 cm/s (f_comp 0.22965 <= F_av 0.25): conservative merge and fractal compounds
     for fractal, V_want, a_want, phi_want in ((False, 2.01214, 0.78317, phi_pd), (True, 2.27869, 0.81633, 0.013896)):
-        o, st, b1, b2 = O.o08_outcome(c, c, 50.0, 0.0, M, fgeo_mode="unity", fractal_compounds=fractal)
+        o, st, b1, b2 = O08.o08_outcome(c, c, 50.0, 0.0, M, fgeo_mode="unity", fractal_compounds=fractal)
         assert float(o.p_two) == 0.0
         np.testing.assert_allclose([float(st.f_d), float(st.f_p)], [0.5, 0.040703], rtol=1e-4)
         np.testing.assert_allclose(float(o.aux["V_one"]), V_want, rtol=1e-5)
@@ -61,18 +61,18 @@ def test_o08_compounds_R7_R8():
         np.testing.assert_allclose(float(st.m * st.f_d), 1.0, rtol=1e-14)
         np.testing.assert_allclose(float(o.expected_mass(1.0, 1.0)), 2.0, rtol=1e-14)
     # bounce at 55 cm/s: masses and f_d kept, porous dust compacted (f_geo = 1 -> f_p = 0)
-    o, st, b1, b2 = O.o08_outcome(c, c, 55.0, 0.0, M, fgeo_mode="unity")
+    o, st, b1, b2 = O08.o08_outcome(c, c, 55.0, 0.0, M, fgeo_mode="unity")
     assert float(o.p_two) == 1.0 and float(b1.f_p) == 0.0 and float(b1.m) == 1.0
     np.testing.assert_allclose(float(o.split), 0.5)
     # geometric f_geo with an offset impact lowers F_av and the compacted fraction
-    o, st, b1, b2 = O.o08_outcome(c, c, 50.0, 1.0, M)
-    A = float(O.lens_area(1.0449172, 1.0449172, 1.0)) / (np.pi * 1.0449172**2)
+    o, st, b1, b2 = O08.o08_outcome(c, c, 50.0, 1.0, M)
+    A = float(O08.lens_area(1.0449172, 1.0449172, 1.0)) / (np.pi * 1.0449172**2)
     np.testing.assert_allclose(float(o.aux["F_av"]), 0.25 * A, rtol=1e-6)
     np.testing.assert_allclose(float(b1.f_p), 0.5 * (1 - A), rtol=1e-6)
     # T4.25 void for V2 = V1/10: 0.045472 V1
     np.testing.assert_allclose(1.1 ** (1.5 * 0.95) - 1.1, 0.045472, rtol=1e-4)
     with pytest.raises(ValueError, match="fgeo_mode"):
-        O.o08_outcome(c, c, 50.0, 0.0, M, fgeo_mode="x")
+        O08.o08_outcome(c, c, 50.0, 0.0, M, fgeo_mode="x")
 
 
 # ----------------------------------------------------------------------------- fragments
@@ -80,27 +80,27 @@ def test_o08_compounds_R7_R8():
     (-1.3, 0.08590, 24.736, 0.040427), (-1.5, 0.14599, 15.811, 0.063246),
     (-2.0, 0.41702, 5.5436, 0.18039), (-3.7, 0.98013, 1.5881, 0.62968)])
 def test_powerlaw_table_66(q, frac, mean, per):
-    np.testing.assert_allclose(float(O.powerlaw_mass_fraction(q, 1.0, 250.0, 1.0, 10.0)), frac, rtol=1e-4)
-    np.testing.assert_allclose(float(O.mean_fragment_mass(q, 1.0, 250.0)), mean, rtol=1e-4)
-    np.testing.assert_allclose(1 / float(O.mean_fragment_mass(q, 1.0, 250.0)), per, rtol=1e-4)
+    np.testing.assert_allclose(float(OC.powerlaw_mass_fraction(q, 1.0, 250.0, 1.0, 10.0)), frac, rtol=1e-4)
+    np.testing.assert_allclose(float(OC.mean_fragment_mass(q, 1.0, 250.0)), mean, rtol=1e-4)
+    np.testing.assert_allclose(1 / float(OC.mean_fragment_mass(q, 1.0, 250.0)), per, rtol=1e-4)
 
 
 def test_powerlaw_partition_and_q_singularities():
     edges = jnp.logspace(-1, 4, 23)  # covers [1, 250] and beyond: clipped to the support
     for q in (-1.0, -1.3, -2.0, -2.0 + 1e-9, -3.7):
-        fr = O.powerlaw_mass_fraction(q, 1.0, 250.0, edges[:-1], edges[1:])
+        fr = OC.powerlaw_mass_fraction(q, 1.0, 250.0, edges[:-1], edges[1:])
         np.testing.assert_allclose(float(jnp.sum(fr)), 1.0, rtol=1e-12)
         assert bool(jnp.all(fr >= 0))
     # continuity through q = -2 (log form) and q = -1 (mean mass), and finite q-derivative
-    a = float(O.powerlaw_mass_fraction(-2.0, 1.0, 250.0, 1.0, 10.0))
-    b = float(O.powerlaw_mass_fraction(-2.0 + 1e-7, 1.0, 250.0, 1.0, 10.0))
+    a = float(OC.powerlaw_mass_fraction(-2.0, 1.0, 250.0, 1.0, 10.0))
+    b = float(OC.powerlaw_mass_fraction(-2.0 + 1e-7, 1.0, 250.0, 1.0, 10.0))
     np.testing.assert_allclose(a, b, rtol=1e-6)
-    np.testing.assert_allclose(float(O.mean_fragment_mass(-1.0, 1.0, 250.0)),
-                               float(O.mean_fragment_mass(-1.0 + 1e-7, 1.0, 250.0)), rtol=1e-6)
-    g = jax.grad(lambda q: O.powerlaw_mass_fraction(q, 1.0, 250.0, 1.0, 10.0))
+    np.testing.assert_allclose(float(OC.mean_fragment_mass(-1.0, 1.0, 250.0)),
+                               float(OC.mean_fragment_mass(-1.0 + 1e-7, 1.0, 250.0)), rtol=1e-6)
+    g = jax.grad(lambda q: OC.powerlaw_mass_fraction(q, 1.0, 250.0, 1.0, 10.0))
     h = 1e-5
-    fd = (float(O.powerlaw_mass_fraction(-2 + h, 1.0, 250.0, 1.0, 10.0))
-          - float(O.powerlaw_mass_fraction(-2 - h, 1.0, 250.0, 1.0, 10.0))) / (2 * h)
+    fd = (float(OC.powerlaw_mass_fraction(-2 + h, 1.0, 250.0, 1.0, 10.0))
+          - float(OC.powerlaw_mass_fraction(-2 - h, 1.0, 250.0, 1.0, 10.0))) / (2 * h)
     np.testing.assert_allclose(float(g(-2.0)), fd, rtol=1e-6)
 
 
@@ -108,10 +108,10 @@ def _sampler_means(n, seeds):
     q, lo, hi = -2.0, 1.0, 250.0
     keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
     # i.i.d. draws (M_pwl large enough that no draw is truncated except the last)
-    draw = jax.vmap(lambda k: O.sample_fragment_masses(k, q, lo, hi, 1e12, n)[0][:-1])
+    draw = jax.vmap(lambda k: OC.sample_fragment_masses(k, q, lo, hi, 1e12, n)[0][:-1])
     x = np.asarray(draw(keys))
-    mean = float(O.mean_fragment_mass(q, lo, hi))
-    ex2 = float(O._int_pow(lo, hi, q + 3.0) / O._int_pow(lo, hi, q + 1.0))
+    mean = float(OC.mean_fragment_mass(q, lo, hi))
+    ex2 = float(OC._int_pow(lo, hi, q + 3.0) / OC._int_pow(lo, hi, q + 1.0))
     se = np.sqrt(ex2 - mean**2) / np.sqrt(n - 1)
     return x, mean, se
 
@@ -136,7 +136,7 @@ def test_sampler_R10():
     # or not (the last fragment takes the remainder); one compiled call
     M_pwl = jnp.array([1000.0, 100.0, 3.7])
     ks = jnp.stack([jax.random.PRNGKey(s) for s in (11, 12, 13)])
-    m, u = jax.vmap(lambda k, Mp: O.sample_fragment_masses(k, q, lo, hi, Mp, 64))(ks, M_pwl)
+    m, u = jax.vmap(lambda k, Mp: OC.sample_fragment_masses(k, q, lo, hi, Mp, 64))(ks, M_pwl)
     np.testing.assert_allclose(np.asarray(jnp.sum(m * u, axis=1)), np.asarray(M_pwl), rtol=1e-13)
     assert bool(jnp.all(u >= 0))
     assert float(jnp.sum(u[0])) > 64.0 and float(jnp.sum(u[1])) < 64.0  # rescaled vs remainder
@@ -145,31 +145,31 @@ def test_sampler_R10():
 # ----------------------------------------------------------------------------- Wada laws
 def test_wada_laws_W1_W2():
     x = jnp.array([0.001, 0.01, 0.03, 0.1, 0.3, 1.0])
-    np.testing.assert_allclose(np.asarray(O.wada_rg_ratio(x)),
+    np.testing.assert_allclose(np.asarray(W.wada_rg_ratio(x)),
                                [1.92426, 1.45982, 1.27949, 1.10726, 0.97059, 0.84], rtol=1e-4)
-    np.testing.assert_allclose(np.asarray(O.wada_rg_ratio(x, "W58")),
+    np.testing.assert_allclose(np.asarray(W.wada_rg_ratio(x, "W58")),
                                [2.57630, 1.87931, 1.61674, 1.37088, 1.17928, 1.0], rtol=1e-4)
-    np.testing.assert_allclose(np.asarray(O.wada_ncon(x)),
+    np.testing.assert_allclose(np.asarray(W.wada_ncon(x)),
                                [1.00562, 1.03162, 1.07208, 1.17783, 1.40536, 2.0], rtol=1e-5)
-    np.testing.assert_allclose(float(O.wada_rg_slope()), -0.136943, rtol=1e-5)
-    np.testing.assert_allclose(np.asarray(O.wada_ncon_max(jnp.array([128.0, 2048.0, 1e6]))),
+    np.testing.assert_allclose(float(W.wada_rg_slope()), -0.136943, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(W.wada_ncon_max(jnp.array([128.0, 2048.0, 1e6]))),
                                [1.31906, 1.34227, 1.34965], rtol=1e-5)
-    np.testing.assert_allclose(np.asarray(O.wada_ncon_max(jnp.array([128.0, 2048.0]), 1.6)),
+    np.testing.assert_allclose(np.asarray(W.wada_ncon_max(jnp.array([128.0, 2048.0]), 1.6)),
                                [1.54697, 1.58674], rtol=1e-5)
     # capped at n_con,max
-    np.testing.assert_allclose(float(O.wada_ncon(1.0, 128.0)), 1.31906, rtol=1e-5)
-    np.testing.assert_allclose(np.asarray(O.wada_bcca_rg(jnp.array([8.0, 32.0, 128.0, 512.0, 2048.0]))),
+    np.testing.assert_allclose(float(W.wada_ncon(1.0, 128.0)), 1.31906, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(W.wada_bcca_rg(jnp.array([8.0, 32.0, 128.0, 512.0, 2048.0]))),
                                [3.0770, 7.4411, 17.992, 43.508, 105.21], rtol=1e-4)
     # W2: with Wada's rounded 1.54 -> 2.6423; with the exact JKR constant 1.542585 -> 2.6379
-    np.testing.assert_allclose(float(O.wada_energy_ratio(1024.0, 5.7, 1.54)), 2.6423, rtol=1e-4)
-    np.testing.assert_allclose(float(O.wada_energy_ratio(1024.0, 5.7)), 2.6379, rtol=1e-4)
-    np.testing.assert_allclose(float(O.wada_energy_ratio(128.0, 18.0, 1.54)), 26.7, rtol=2e-3)
-    np.testing.assert_allclose(float(O.wada_energy_ratio(128.0, 11.01, 1.54)), 10.0, rtol=2e-3)
+    np.testing.assert_allclose(float(W.wada_energy_ratio(1024.0, 5.7, 1.54)), 2.6423, rtol=1e-4)
+    np.testing.assert_allclose(float(W.wada_energy_ratio(1024.0, 5.7)), 2.6379, rtol=1e-4)
+    np.testing.assert_allclose(float(W.wada_energy_ratio(128.0, 18.0, 1.54)), 26.7, rtol=2e-3)
+    np.testing.assert_allclose(float(W.wada_energy_ratio(128.0, 11.01, 1.54)), 10.0, rtol=2e-3)
     # strict validity masks
-    v = O.wada_rg_ratio(jnp.array([0.001, 0.05, 0.5]), "W51", n_k=254.0, strict=True)
+    v = W.wada_rg_ratio(jnp.array([0.001, 0.05, 0.5]), "W51", n_k=254.0, strict=True)
     assert np.isnan(float(v[0])) and np.isfinite(float(v[1])) and np.isnan(float(v[2]))
     with pytest.raises(ValueError, match="n_k"):
-        O.wada_rg_ratio(0.05, strict=True)
+        W.wada_rg_ratio(0.05, strict=True)
 
 
 def test_wada_x_roll_at_tabulated_energies():
@@ -185,7 +185,7 @@ def test_wada_x_roll_at_tabulated_energies():
 # ----------------------------------------------------------------------------- thresholds
 def test_dt_thresholds_F3():
     e = jnp.array([0.5, 2.99, 3.0, 5.0, 10.0, 20.0, 30.0, 1e3])
-    f = np.asarray(O.dt_fragment_fraction(e, 1.0, 1.0))
+    f = np.asarray(DT.dt_fragment_fraction(e, 1.0, 1.0))
     assert np.all(f[:3] == 0.0)
     np.testing.assert_allclose(f[4], 0.5, rtol=1e-14)  # N_large/N_tot = 0.5 at 10 N_c E_br
     np.testing.assert_allclose(f[6:], 1.0, rtol=1e-14)
@@ -195,16 +195,16 @@ def test_dt_thresholds_F3():
     M = Material.ch6_silicate()
     m = 1e3 * M.m0
     dv = jnp.sqrt(2 * 10 * (2e3) * M.e_break() / (0.5 * m))  # E = 1/2 (m/2) dv^2 = 10 N E_br
-    o = O.o07_outcome(m, 3.0, m, 3.0, dv, M, frag_model=O.DTEnergy())
+    o = O07.o07_outcome(m, 3.0, m, 3.0, dv, M, frag_model=DT.DTEnergy())
     np.testing.assert_allclose(float(1 - o.f_pwl), 0.5, rtol=1e-10)
-    o = O.o07_outcome(m, 3.0, m, 3.0, dv * 0.99 * np.sqrt(0.3), M, frag_model=O.DTEnergy())
+    o = O07.o07_outcome(m, 3.0, m, 3.0, dv * 0.99 * np.sqrt(0.3), M, frag_model=DT.DTEnergy())
     assert float(o.f_pwl) == 0.0
     np.testing.assert_allclose(float(o.m_hi), 0.25 * 2 * float(m), rtol=1e-14)
     # Wada contacts n_k = N - 2 shift the threshold
-    ow = O.o07_outcome(m, 3.0, m, 3.0, dv, M, frag_model=O.DTEnergy(contacts="wada"))
-    np.testing.assert_allclose(float(ow.f_pwl), float(O.dt_fragment_fraction(10 * 2e3, 2e3 - 2, 1.0)), rtol=1e-10)
+    ow = O07.o07_outcome(m, 3.0, m, 3.0, dv, M, frag_model=DT.DTEnergy(contacts="wada"))
+    np.testing.assert_allclose(float(ow.f_pwl), float(DT.dt_fragment_fraction(10 * 2e3, 2e3 - 2, 1.0)), rtol=1e-10)
     with pytest.raises(ValueError, match="contacts"):
-        O.DTEnergy(contacts="Nc")
+        DT.DTEnergy(contacts="Nc")
 
 
 def test_dt_threshold_velocities_wada_B10():
@@ -213,22 +213,34 @@ def test_dt_threshold_velocities_wada_B10():
     for M, want in ((Material.wada_quartz(), (0.947, 2.12, 15.1)), (Material.wada_ice(), (0.305, 0.683, 4.87)),
                     (Material.wada_quartz(3e-7), (3.67, 8.20, 58.4)), (Material.wada_ice(3e-7), (1.18, 2.65, 18.9))):
         fcdc = M.F_c() * jkr_delta_c(M.gamma, M.R_pair, M.E_star)
-        th = O.dt_thresholds(N - 2.0, M.e_roll(), M.e_break())
+        th = DT.dt_thresholds(N - 2.0, M.e_roll(), M.e_break())
         v = lambda E: float(jnp.sqrt(8.0 * E / (N * fcdc)))  # E_imp = N m1 v^2/8, v0^2 = F_c delta_c/m1
         np.testing.assert_allclose([v(M.e_roll()), v(th["restructuring"]), v(th["max_compression"])], want, rtol=4e-3)
         np.testing.assert_allclose([v(th["erosion"]), v(th["catastrophic"])], [6.06, 11.07], rtol=2e-3)
 
 
-def test_shatter_at_mass():
-    M = Material(a0=1e-5, rho_s=1.0, gamma=25.0, E_star=1e11, xi_crit=2e-7)
-    m0 = float(M.m0)
-    sm = O.ShatterAtMass(m_frag=1e10 * m0)
-    m1 = jnp.array([1e9, 6e9, 1e9]) * m0
-    m2 = jnp.array([1e9, 6e9, 1e1]) * m0
-    o = O.o07_outcome(m1, 1.0, m2, 1.0, 0.0, M, frag_model=sm)
-    np.testing.assert_array_equal(np.asarray(o.f_pwl), [0.0, 1.0, 0.0])
-    np.testing.assert_allclose(np.asarray(o.m_lo), m0, rtol=1e-14)
-    np.testing.assert_allclose(np.asarray(o.m_hi), m0, rtol=1e-14)
+def test_shatter_above():
+    """Thesis §5.3.4: a product heavier than m_frag becomes M/m_mono monomers (both engines' hooks)."""
+    from jaxcoag.kernels import Constant
+    from jaxcoag.outcomes import ShatterAbove
+
+    m0 = 3.7e-15
+    sa = ShatterAbove(1e10 * m0, m0)
+    m1 = jnp.array([1e9, 6e9, 1e9, 5e9]) * m0
+    m2 = jnp.array([1e9, 6e9, 1e1, 5e9]) * m0  # the last product sits exactly at m_frag: it sticks
+    np.testing.assert_array_equal(np.asarray(sa.probability(Constant(1.0), m1, m2)), [0.0, 1.0, 0.0, 0.0])
+    psi = jnp.ones(1)
+    key = jax.random.PRNGKey(0)
+    for a, b, frag in ((1e9, 1e9, False), (6e9, 6e9, True)):
+        mi, mj = a * m0, b * m0
+        pr = sa.products(jnp.asarray(mi), jnp.log(mi), psi, jnp.asarray(mj), jnp.log(mj), psi, 1.0, 0.0, key)
+        np.testing.assert_allclose(float(jnp.sum(pr.count * pr.m)), mi + mj, rtol=1e-15)
+        np.testing.assert_allclose(float(pr.m[0]), m0 if frag else mi + mj, rtol=1e-15)
+        np.testing.assert_allclose(float(pr.count[0]), (a + b) if frag else 1.0, rtol=1e-12)
+    # a group event: the i-particle sweeps up n_c = 2^40 monomers and crosses m_frag
+    n_c = 2.0 ** 40
+    pr = sa.products(jnp.asarray(m0), jnp.log(m0), psi, jnp.asarray(m0), jnp.log(m0), psi, n_c, 40 * np.log(2.0), key)
+    np.testing.assert_allclose(float(pr.count[0]), n_c + 1.0, rtol=1e-14)
 
 
 # ----------------------------------------------------------------------------- interface
@@ -243,14 +255,15 @@ def _grid(n=6):
 def _all_outcomes():
     M, m1, p1, m2, p2, dv = _grid()
     outs = {
-        "o07": O.o07_outcome(m1, p1, m2, p2, dv, M),
-        "o07_dt": O.o07_outcome(m1, p1, m2, p2, dv, M, restr_factor=5.0, frag_model=O.DTEnergy()),
-        "o07_dt_smooth": O.o07_outcome(m1, p1, m2, p2, dv, M, frag_model=O.DTEnergy(), width=0.3),
-        "o07_bounce": O.o07_outcome(m1, p1, m2, p2, dv, M, frag_model=O.DTEnergy(),
-                                    bounce_model=O.BounceWhenCompact(psi_max=40.0), width=0.5),
-        "shatter": O.o07_outcome(m1, p1, m2, p2, dv, M, frag_model=O.ShatterAtMass(m_frag=1e8 * M.m0)),
-        "bounce": O.bounce_outcome(m1, p1, m2, p2, M.m0),
-        "stick": O.sticking_outcome(m1, m2, psi_hit_and_stick(m1, p1, m2, p2, m0=M.m0), M.m0),
+        "o07": O07.o07_outcome(m1, p1, m2, p2, dv, M),
+        "o07_dt": O07.o07_outcome(m1, p1, m2, p2, dv, M, restr_factor=5.0, frag_model=DT.DTEnergy()),
+        "o07_dt_smooth": O07.o07_outcome(m1, p1, m2, p2, dv, M, frag_model=DT.DTEnergy(), width=0.3),
+        "o07_bounce": O07.o07_outcome(m1, p1, m2, p2, dv, M, frag_model=DT.DTEnergy(),
+                                    bounce_model=O07.BounceWhenCompact(psi_max=40.0), width=0.5),
+        "shatter": OC.Outcome.build(f_pwl=jnp.where(m1 + m2 > 1e8 * M.m0, 1.0, 0.0), m_lo=M.m0, m_hi=M.m0,
+                                    psi_one=psi_hit_and_stick(m1, p1, m2, p2, m0=M.m0)),
+        "bounce": OC.bounce_outcome(m1, p1, m2, p2, M.m0),
+        "stick": OC.sticking_outcome(m1, m2, psi_hit_and_stick(m1, p1, m2, p2, m0=M.m0), M.m0),
     }
     return M, m1, p1, m2, p2, dv, outs
 
@@ -285,8 +298,8 @@ def test_mass_conservation_and_invariants_every_outcome():
 
 def test_o07_symmetry():
     M, m1, p1, m2, p2, dv, _ = _all_outcomes()
-    a = O.o07_outcome(m1, p1, m2, p2, dv, M, frag_model=O.DTEnergy())
-    b = O.o07_outcome(m2.T, p2.T, m1.T, p1.T, dv, M, frag_model=O.DTEnergy())
+    a = O07.o07_outcome(m1, p1, m2, p2, dv, M, frag_model=DT.DTEnergy())
+    b = O07.o07_outcome(m2.T, p2.T, m1.T, p1.T, dv, M, frag_model=DT.DTEnergy())
     for fld in ("psi_one", "f_pwl", "p_two", "m_hi"):
         np.testing.assert_allclose(np.asarray(getattr(a, fld)), np.asarray(getattr(b, fld)), rtol=1e-14)
 
@@ -297,10 +310,10 @@ def test_o07_matches_porosity_recipe():
     m1, m2 = 100 * m0, 10 * m0
     # hit-and-stick (E < E_roll) and compaction (E = 0.5 N E_roll)
     dv_hs = jnp.sqrt(2 * 0.5 * er / (m1 * m2 / (m1 + m2)))
-    o = O.o07_outcome(m1, 10.0, m2, 2.0, dv_hs, M)
+    o = O07.o07_outcome(m1, 10.0, m2, 2.0, dv_hs, M)
     np.testing.assert_allclose(float(o.psi_one), 9.75399, rtol=1e-5)
     dv_c = jnp.sqrt(2 * 0.5 * 110 * er / (m1 * m2 / (m1 + m2)))
-    o = O.o07_outcome(m1, 10.0, m2, 2.0, dv_c, M)
+    o = O07.o07_outcome(m1, 10.0, m2, 2.0, dv_c, M)
     pm = (100 * 10 + 10 * 2) / 110
     np.testing.assert_allclose(float(o.psi_one), 1 + 0.5 * (pm - 1), rtol=1e-10)
     np.testing.assert_allclose(float(o.aux["energy"]), 0.5 * 110 * float(er), rtol=1e-12)
@@ -312,7 +325,7 @@ def test_smooth_mode_S1_and_gradients():
 
     def outcome(lg, lxi, ldv, width):
         mat = eqx.tree_at(lambda t: (t.gamma, t.xi_crit), M, (jnp.exp(lg), jnp.exp(lxi)))
-        return O.o07_outcome(m1, 5.0, m2, 3.0, jnp.exp(ldv), mat, frag_model=O.DTEnergy(),
+        return O07.o07_outcome(m1, 5.0, m2, 3.0, jnp.exp(ldv), mat, frag_model=DT.DTEnergy(),
                              restr_factor=5.0, width=width, validate=False)
 
     x0 = jnp.array([jnp.log(25.0), jnp.log(2e-7)])
@@ -331,7 +344,7 @@ def test_smooth_mode_S1_and_gradients():
         soft = jax.vmap(lambda l: outcome(x0[0], x0[1], l, 1e-3))(dvs)
         vals, grads = jax.vmap(jax.value_and_grad(obj))(pts)
         # gradient at dv = 0 is finite (no sqrt/log singularity)
-        g0 = jax.grad(lambda v: O.o07_outcome(m1, 5.0, m2, 3.0, v, M, width=0.3, validate=False).psi_one)(0.0)
+        g0 = jax.grad(lambda v: O07.o07_outcome(m1, 5.0, m2, 3.0, v, M, width=0.3, validate=False).psi_one)(0.0)
         return hard, soft, vals, grads, g0
 
     hard, soft, vals, grads, g0 = everything()
@@ -348,7 +361,7 @@ def test_smooth_mode_S1_and_gradients():
 
 def test_jit_vmap_equivalence():
     M, m1, p1, m2, p2, dv, _ = _all_outcomes()
-    f = lambda a, b, c, d, v: O.o07_outcome(a, b, c, d, v, M, frag_model=O.DTEnergy())
+    f = lambda a, b, c, d, v: O07.o07_outcome(a, b, c, d, v, M, frag_model=DT.DTEnergy())
     eager = f(m1, p1, m2, p2, dv)
     # jit(vmap(f)) over rows == eager broadcast grid == stacked loop (one compilation)
     rows = jax.jit(jax.vmap(f))(m1[:, 0], p1[:, 0], jnp.broadcast_to(m2, (6, 6)), jnp.broadcast_to(p2, (6, 6)), dv)
@@ -363,10 +376,10 @@ def test_jit_vmap_equivalence():
 def test_bad_input_errors():
     M = Material.ch2_quartz()
     with pytest.raises(JaxcoagInputError, match="dv"):
-        O.o07_outcome(1e-12, 1.0, 1e-12, 1.0, -3.0, M)
+        O07.o07_outcome(1e-12, 1.0, 1e-12, 1.0, -3.0, M)
     with pytest.raises(JaxcoagInputError, match="m1"):
-        O.collision_energy(0.0, 1.0, 1.0)
+        OC.collision_energy(0.0, 1.0, 1.0)
     with pytest.raises(JaxcoagInputError, match="b"):
-        O.lens_area(1.0, 1.0, -1.0)
+        O08.lens_area(1.0, 1.0, -1.0)
     with pytest.raises(ValueError, match="fit"):
-        O.wada_rg_ratio(0.1, "W99")
+        W.wada_rg_ratio(0.1, "W99")

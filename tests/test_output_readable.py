@@ -22,8 +22,9 @@ from matplotlib import colors
 
 from _configs import SMALL
 from _scripts import ROOT, load_script
+import jaxcoag
 from jaxcoag import cli, config, io, kernels, plot, runner
-from jaxcoag.binned import MassGrid, monodisperse, solve_binned
+from jaxcoag.binned import MassGrid
 from jaxcoag.physics import drag
 from jaxcoag.physics import gas as gasmod
 
@@ -65,13 +66,15 @@ def _gas():
 
 def test_netcdf_time_size_stokes_coordinates(frag_run):
     res, ds, _ = frag_run
-    for name, unit in (("time", "s"), ("t_yr", "yr"), ("mass", "g"), ("a", "cm"), ("St", "1")):
+    for name, unit in (("t", "s"), ("t_yr", "yr"), ("m", "g"), ("m_edge", "g"), ("a", "cm"), ("St", "1")):
         assert name in ds.coords and ds[name].attrs["units"] == unit, name
-    t = ds["time"].values
-    np.testing.assert_array_equal(t, np.asarray(res.solution.ts))
+    for name in ("t_yr", "a", "St"):
+        assert ds[name].dims == (("t",) if name == "t_yr" else ("m",)), name
+    t = ds["t"].values
+    np.testing.assert_array_equal(t, np.asarray(res.result.t))
     np.testing.assert_allclose(ds["t_yr"].values, t / YEAR_S, rtol=1e-15, atol=0)
     assert ds["t_yr"].values[-1] == pytest.approx(10.0, rel=1e-14)  # t_end_yr = 10
-    m = ds["mass"].values
+    m = ds["m"].values
     rho_s = 1.6
     np.testing.assert_allclose(ds["a"].values, (3 * m / (4 * math.pi * rho_s)) ** (1 / 3), rtol=1e-14)
     g = _gas()
@@ -98,7 +101,7 @@ def test_netcdf_fragmentation_barrier_attrs(frag_run):
 def test_run_figure_time_colorbar_and_frag_line(frag_run):
     res, ds, fig = frag_run
     ax_f = fig.axes[0]
-    nt = ds.sizes["time"]
+    nt = ds.sizes["t"]
     # the time colour bar: a colour-bar axes with a log norm over the positive t_yr
     cbars = [a for a in fig.axes[4:] if "t [yr]" in a.get_ylabel()]
     assert len(cbars) == 1
@@ -137,12 +140,13 @@ def test_frag_limited_size_stokes_regime():
 
 def test_analytic_kernel_dataset_has_no_size_or_stokes():
     g = MassGrid.log(10 ** -0.1, 1e3, 5)
-    sol = solve_binned(kernels.Constant(1.0), g, monodisperse(g, 1.0, 1.0), jnp.array([0.0, 1.0, 5.0]))
-    ds = io.to_xarray(sol, kernel=kernels.Constant(1.0))
+    res = jaxcoag.evolve(kernels.Constant(1.0), jaxcoag.Binned(g), jaxcoag.Monodisperse(1.0, 1.0),
+                         jnp.array([0.0, 1.0, 5.0]))
+    ds = res.to_xarray(kernel=kernels.Constant(1.0))
     assert "a" not in ds.variables and "St" not in ds.variables
     np.testing.assert_allclose(ds["t_yr"].values, np.array([0.0, 1.0, 5.0]) / YEAR_S, rtol=1e-15)
     assert ds["t_yr"].attrs["units"] == "yr"
-    fig = plot.panel(sol)
+    fig = plot.panel(res)
     cb = [a for a in fig.axes[4:] if a.get_ylabel().startswith("t [s]")]
     assert len(cb) == 1 and not isinstance(cb[0]._colorbar.norm, colors.LogNorm)  # 1..5 s: under a decade
 
@@ -158,8 +162,8 @@ def _mc_result(psi):
     return mc.MCResult(t=jnp.array([0.0, 3.15576e9]), m=m, logm=jnp.log(m), psi=psi, w=w,
                        z=jnp.zeros((2, 3), jnp.int32), valid=valid, V=V, logV=jnp.log(V),
                        M_tot=jnp.sum(jnp.where(valid, m * w, 0.0), axis=1), n_events_snap=jnp.array([0, 3]),
-                       status=jnp.array(0, jnp.int32), n_events=jnp.array(3), n_dup=jnp.array(0),
-                       n_merge=jnp.array(0), config=(("mode", "const_v"),))
+                       status=jaxcoag.RESULTS.successful, flags=jnp.array(0, jnp.int32), n_events=jnp.array(3),
+                       n_dup=jnp.array(0), n_merge=jnp.array(0), config=(("mode", "const_v"),))
 
 
 def test_mc_dataset_t_yr_and_stokes_with_a_physical_kernel():
@@ -170,27 +174,35 @@ def test_mc_dataset_t_yr_and_stokes_with_a_physical_kernel():
     K = scenes.nebula_ch4().kernel(g, rho_s=1.6)
     r = _mc_result(jnp.zeros((2, 3, 0)))
     ds = r.to_xarray()
-    assert "a" not in ds.variables and "St" not in ds.variables  # no kernel given: nothing invented
+    for name in ("a", "St", "a_species", "St_species"):  # no kernel given: nothing invented
+        assert name not in ds.variables
     assert "a" not in r.to_xarray(kernel=kernels.Constant(1.0)).variables  # analytic kernel: no rho_s, no gas
+    assert "a_species" not in r.to_xarray(kernel=kernels.Constant(1.0)).variables
     np.testing.assert_allclose(ds["t_yr"].values, [0.0, 100.0], rtol=1e-15)
-    assert ds["t_yr"].attrs["units"] == "yr" and ds["time"].attrs["units"] == "s"
+    assert ds["t_yr"].attrs["units"] == "yr" and ds["t"].attrs["units"] == "s"
     ds = r.to_xarray(kernel=K, edges=[1e-12, 1e-8, 1e-4])
     valid = ds["valid"].values.astype(bool)
-    m = ds["m"].values[valid]
-    np.testing.assert_allclose(ds["a"].values[valid], (3 * m / (4 * math.pi * 1.6)) ** (1 / 3), rtol=1e-14)
+    m = ds["m_species"].values[valid]
+    np.testing.assert_allclose(ds["a_species"].values[valid], (3 * m / (4 * math.pi * 1.6)) ** (1 / 3), rtol=1e-14)
     st_ref = np.asarray(drag.stokes_number(drag.friction_time_compact(jnp.asarray(m), 1.6, g), g))
-    np.testing.assert_allclose(ds["St"].values[valid], st_ref, rtol=1e-13)
-    assert np.all(np.isnan(ds["St"].values[~valid])) and np.all(np.isnan(ds["a"].values[~valid]))
-    assert ds["a"].attrs["units"] == "cm" and ds["St"].attrs["units"] == "1"
+    np.testing.assert_allclose(ds["St_species"].values[valid], st_ref, rtol=1e-13)
+    assert np.all(np.isnan(ds["St_species"].values[~valid])) and np.all(np.isnan(ds["a_species"].values[~valid]))
+    assert ds["a_species"].attrs["units"] == "cm" and ds["St_species"].attrs["units"] == "1"
+    # the bin centres carry a and St on m, as in a binned run's dataset
     mb = np.sqrt(np.array([1e-12 * 1e-8, 1e-8 * 1e-4]))
-    np.testing.assert_allclose(ds["a_bin"].values, (3 * mb / (4 * math.pi * 1.6)) ** (1 / 3), rtol=1e-14)
+    assert ds["a"].dims == ("m",) and ds["St"].dims == ("m",)
+    np.testing.assert_allclose(ds["m"].values, mb, rtol=1e-15)
+    np.testing.assert_allclose(ds["a"].values, (3 * mb / (4 * math.pi * 1.6)) ** (1 / 3), rtol=1e-14)
+    np.testing.assert_allclose(ds["St"].values, np.asarray(drag.stokes_number(
+        drag.friction_time_compact(jnp.asarray(mb), 1.6, g), g)), rtol=1e-13)
     # porous grains (enlargement factor psi = 8): a = a* psi^(1/3), Epstein tau = rho_s a* / (rho_g c_g psi^(2/3))
     Kp = dataclasses.replace(scenes.nebula_ch4(), porosity="psi").kernel(g, rho_s=1.6)
     dp = _mc_result(jnp.full((2, 3, 1), 8.0)).to_xarray(kernel=Kp)
     a_star = (3 * m / (4 * math.pi * 1.6)) ** (1 / 3)
-    np.testing.assert_allclose(dp["a"].values[valid], 2.0 * a_star, rtol=1e-14)
+    np.testing.assert_allclose(dp["a_species"].values[valid], 2.0 * a_star, rtol=1e-14)
     st_ep = 1.6 * a_star / (float(g.rho_g) * float(g.c_g) * 4.0) / float(g.t_L)
-    np.testing.assert_allclose(dp["St"].values[valid], st_ep, rtol=1e-12)
+    np.testing.assert_allclose(dp["St_species"].values[valid], st_ep, rtol=1e-12)
+    assert "St" not in dp.variables  # a bin-centre mass alone does not fix a porous grain's size
 
 
 def test_version_flag_prints_the_installed_version():
@@ -216,11 +228,11 @@ def test_sweep_shows_progress_and_writes_the_figure(tmp_path, capsys):
     assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and str(png) in cap.out
     ds = io.load_netcdf(out)
     assert ds.attrs["figure"] == str(png)
-    np.testing.assert_allclose(ds["t_yr"].values, ds["time"].values / YEAR_S, rtol=1e-15)
+    np.testing.assert_allclose(ds["t_yr"].values, ds["t"].values / YEAR_S, rtol=1e-15)
     # St per member from its own gas state
     for i, alpha in enumerate((1e-4, 1e-3)):
         g = gasmod.mmsn_hayashi81(1.495978707e13, alpha=alpha)
-        m = ds["mass"].values
+        m = ds["m"].values
         ref = np.asarray(drag.stokes_number(drag.friction_time_compact(jnp.asarray(m), 1.6, g), g))
         np.testing.assert_allclose(ds["St"].values[i], ref, rtol=1e-13)
     # the figure shows the swept quantity: mass peak against alpha

@@ -2,7 +2,7 @@
 
 The quick mode runs 1 AU, alpha = 1e-4, porous (O07, psi as MC structural parameter) and compact, one
 small grouped MC run each with the rain-out sink (the porous zoom mass from a pilot run to the first
-rain-out, ``scenes.ch2_pilot``), and checks: a = a* psi^(1/3) exactly for every rained
+rain-out, ``jaxcoag.scenes.mc_setups.ch2_pilot``), and checks: a = a* psi^(1/3) exactly for every rained
 particle, the §11.1 claims in decades, the rain-out size of eq. 2.25 computed independently from the
 gas, the pilot's <psi> against the published one and its rain-out mass against eq. 2.25, and that the
 published rows' own consistency checks (no simulation) are reported but not counted.

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from jaxcoag import Scene, constants as C, effects as E, scenes
+from jaxcoag.scenes import mc_setups, tables
 from jaxcoag._validate import JaxcoagInputError
-from jaxcoag.mc.recipe_outcome import RainOutKernel
+from jaxcoag.mc import RainOutKernel
 from jaxcoag.physics import gas as G
 from jaxcoag.physics import turbulence as T
 
@@ -161,7 +162,7 @@ def test_ch2_presets_gas_and_rain_out_kernel():
     assert sp.effect_names == ("brownian", "turbulence_w84") == sc.effect_names
     assert sp.porosity is not None and sc.porosity is None
     assert scenes.get("ch2_porous", method="exact").effect_names == ("brownian", "turbulence")
-    st = scenes.ch2_setup(1, 1e-4, True, psi_est=80.0)
+    st = mc_setups.ch2_setup(1, 1e-4, True, psi_est=80.0)
     gas = st["gas"]
     # z = H_g: density e^-1/2 of the Hayashi midplane; t_L = 2 pi / Omega; v_L = alpha^1/2 c_g
     mid = G.mmsn_hayashi81(C.AU, 1e-4)
@@ -172,7 +173,7 @@ def test_ch2_presets_gas_and_rain_out_kernel():
     np.testing.assert_allclose(st["tau_rain"], 1e-4 / float(gas.Omega), rtol=1e-12)
     np.testing.assert_allclose(st["m0"], 1.2566e-14, rtol=1e-4)  # ch2-quartz monomer (thesis ch. 2: a0 = 0.1 um, rho_s = 3)
     assert st["name"] == "R1Ta4-P" and st["reference"]["psi"] == 86.0
-    st5 = scenes.ch2_setup(5, 1e-6, True, m_end=1e-9)
+    st5 = mc_setups.ch2_setup(5, 1e-6, True, m_end=1e-9)
     assert st5["name"] == "R5Ta6-P" and st5["reference"]["m"] == 4.6e-10
     np.testing.assert_allclose(st5["rho_d"], float(st5["gas"].rho_g) / 57.0, rtol=1e-12)
     np.testing.assert_allclose(st5["m0"], 4.1888e-15, rtol=1e-4)
@@ -191,7 +192,7 @@ def test_ch2_presets_gas_and_rain_out_kernel():
     lk = np.asarray(K.log_kernel_from_log_mass(jnp.log(m), jnp.log(m[::-1]), x, x))
     assert np.all(np.isneginf(lk[gone | gone[::-1]])) and np.all(np.isfinite(lk[~(gone | gone[::-1])]))
     with pytest.raises(ValueError, match="R_au must be 1"):
-        scenes.ch2_setup(3, 1e-4, True)
+        mc_setups.ch2_setup(3, 1e-4, True)
 
 
 def _m_rain_epstein(st, psi):
@@ -207,44 +208,45 @@ def test_ch2_setup_zoom_is_set_by_psi_est_not_by_the_published_psi(monkeypatch):
     """Issue 12 point 7: the zoom mass m* = 2 m_rain, m_rain the root of tau_f(m, psi_est) = tau_rain
     (eq. 2.25) on a 40-per-decade grid; changing the published T-Tab2.2 row changes nothing."""
     ns = 16
-    st = scenes.ch2_setup(1, 1e-4, True, ns_target=ns, psi_est=83.0)
+    st = mc_setups.ch2_setup(1, 1e-4, True, ns_target=ns, psi_est=83.0)
     m_exact = _m_rain_epstein(st, 83.0)  # 0.2232 g in the Hayashi gas at z = H_g (grid root: 0.2235 g)
     assert 1.0 < st["m_rain_est"] / m_exact <= 10 ** (1 / 40) * (1 + 1e-12)
     np.testing.assert_allclose(m_exact, 0.22317, rtol=1e-4)
-    m_end = st["mc"]["n_particles"] * st["m0"] / ns
+    m_end = st["engine"].n_particles * st["m0"] / ns
     np.testing.assert_allclose(m_end, 2 * st["m_rain_est"], rtol=1e-12)
+    np.testing.assert_allclose(st["m_end"], m_end, rtol=1e-14)
     assert st["psi_est"] == 83.0
-    comp = scenes.ch2_setup(1, 1e-4, False, ns_target=ns)
+    comp = mc_setups.ch2_setup(1, 1e-4, False, ns_target=ns)
     assert comp["psi_est"] == 1.0 and 1.0 < comp["m_rain_est"] / _m_rain_epstein(comp, 1.0) <= 10 ** (1 / 40) * (1 + 1e-12)
     # the published psi (and every other number of the row) is not read
     for name, fake in (("R1Ta4-P", dict(psi=1e4, m=1e3, a=50.0)), ("R1Ta4-C", dict(psi=50.0, m=1.0))):
-        monkeypatch.setitem(scenes.CH2_TABLE_2_2, name, dict(scenes.CH2_TABLE_2_2[name], **fake))
-    st2 = scenes.ch2_setup(1, 1e-4, True, ns_target=ns, psi_est=83.0)
-    comp2 = scenes.ch2_setup(1, 1e-4, False, ns_target=ns)
+        monkeypatch.setitem(tables.CH2_TABLE_2_2, name, dict(tables.CH2_TABLE_2_2[name], **fake))
+    st2 = mc_setups.ch2_setup(1, 1e-4, True, ns_target=ns, psi_est=83.0)
+    comp2 = mc_setups.ch2_setup(1, 1e-4, False, ns_target=ns)
     assert st2["reference"]["psi"] == 1e4 and comp2["reference"]["psi"] == 50.0  # the patch is visible
-    assert st2["m_rain_est"] == st["m_rain_est"] and st2["mc"]["n_particles"] == st["mc"]["n_particles"]
-    assert comp2["m_rain_est"] == comp["m_rain_est"] and comp2["mc"]["n_particles"] == comp["mc"]["n_particles"]
+    assert st2["m_rain_est"] == st["m_rain_est"] and st2["engine"].n_particles == st["engine"].n_particles
+    assert comp2["m_rain_est"] == comp["m_rain_est"] and comp2["engine"].n_particles == comp["engine"].n_particles
     # a porous setup without psi_est or m_end asks for the pilot instead of falling back on the table
     with pytest.raises(JaxcoagInputError, match="ch2_pilot"):
-        scenes.ch2_setup(1, 1e-4, True)
+        mc_setups.ch2_setup(1, 1e-4, True)
     for bad in (0.5, float("nan"), "x"):
         with pytest.raises(JaxcoagInputError, match="psi_est"):
-            scenes.ch2_setup(1, 1e-4, True, psi_est=bad)
+            mc_setups.ch2_setup(1, 1e-4, True, psi_est=bad)
     with pytest.raises(JaxcoagInputError, match="porous runs only"):
-        scenes.ch2_setup(1, 1e-4, False, psi_est=80.0)
+        mc_setups.ch2_setup(1, 1e-4, False, psi_est=80.0)
     with pytest.raises(JaxcoagInputError, match="m_end"):
-        scenes.ch2_setup(1, 1e-4, True, m_end=-1.0)
+        mc_setups.ch2_setup(1, 1e-4, True, m_end=-1.0)
     # m_end alone fixes the zoom; m_rain_est is then unknown
-    st3 = scenes.ch2_setup(1, 1e-4, True, ns_target=ns, m_end=0.5)
+    st3 = mc_setups.ch2_setup(1, 1e-4, True, ns_target=ns, m_end=0.5)
     assert st3["m_rain_est"] is None and st3["psi_est"] is None
-    np.testing.assert_allclose(st3["mc"]["n_particles"] * st3["m0"], ns * 0.5, rtol=1e-12)
+    np.testing.assert_allclose(st3["engine"].n_particles * st3["m0"], ns * 0.5, rtol=1e-12)
 
 
 def test_rained_fraction_stop_predicate_by_hand():
     """RainedFraction: rained mass sum(g m | tau_f > tau_rain) against fraction * sum(g m | valid)."""
     from types import SimpleNamespace
 
-    st = scenes.ch2_setup(1, 1e-4, True, psi_est=80.0)
+    st = mc_setups.ch2_setup(1, 1e-4, True, psi_est=80.0)
     K = st["kernel"]
     m = jnp.array([1e-3, 0.5, 2.0, 7.0])
     psi = jnp.full((4, 1), 80.0)
@@ -254,20 +256,20 @@ def test_rained_fraction_stop_predicate_by_hand():
                             valid=jnp.array([True, True, True, False]))
     frac = (0.5 + 2.0 * 3.0) / (1e-3 * 3 * 1024 + 0.5 + 2.0 * 3.0)  # 6.5 / 9.572 = 0.679
     for f, want in ((0.0, True), (frac - 1e-9, True), (frac + 1e-9, False), (1.0, False)):
-        assert bool(scenes.RainedFraction(K, f)(state)) is want
+        assert bool(mc_setups.RainedFraction(K, f)(state)) is want
     none = SimpleNamespace(**{**vars(state), "valid": jnp.array([True, False, False, False])})
-    assert not bool(scenes.RainedFraction(K, 0.0)(none))
+    assert not bool(mc_setups.RainedFraction(K, 0.0)(none))
     with pytest.raises(JaxcoagInputError, match="fraction"):
-        scenes.RainedFraction(K, 1.5)
+        mc_setups.RainedFraction(K, 1.5)
     with pytest.raises(JaxcoagInputError, match="RainOutKernel"):
-        scenes.RainedFraction(K.base, 0.0)
+        mc_setups.RainedFraction(K.base, 0.0)
 
 
 def test_ch2_pilot_refuses_bad_options():
     for kw, msg in ((dict(psi_start=0.5), "psi_start"), (dict(n_pass=0), "n_pass"), (dict(runs=1.5), "runs"),
                     (dict(psi_est=80.0), "set by the pilot"), (dict(m_end=1.0), "set by the pilot")):
         with pytest.raises(JaxcoagInputError, match=msg):
-            scenes.ch2_pilot(1, 1e-4, ns_target=8, **kw)
+            mc_setups.ch2_pilot(1, 1e-4, ns_target=8, **kw)
 
 
 @pytest.mark.slow
@@ -276,12 +278,12 @@ def test_ch2_pilot_reproduces_the_published_psi(monkeypatch):
     published T-Tab2.2 <psi> = 86 within 0.7-1.4x (measured at Ns* = 16: 78-98 over 9 single runs, sd
     7.6 = 9 %), with the table patched to psi = 1e4 (so it cannot have been read); its m_rain_est is the
     grid root of tau_f = tau_rain (eq. 2.25) and ch2_setup(psi_est=...) reproduces it."""
-    monkeypatch.setitem(scenes.CH2_TABLE_2_2, "R1Ta4-P", dict(scenes.CH2_TABLE_2_2["R1Ta4-P"], psi=1e4, m=1e3))
-    p = scenes.ch2_pilot(1, 1e-4, ns_target=32, runs=2, seed=5, f_eps=1e-2, t_end_yr=1e5)
+    monkeypatch.setitem(tables.CH2_TABLE_2_2, "R1Ta4-P", dict(tables.CH2_TABLE_2_2["R1Ta4-P"], psi=1e4, m=1e3))
+    p = mc_setups.ch2_pilot(1, 1e-4, ns_target=32, runs=2, seed=5, f_eps=1e-2, t_end_yr=1e5)
     assert 60.0 < p["psi"] < 120.0 and len(p["psi_passes"]) == 2 and p["psi_runs"].shape == (2,)
     assert all(60.0 < v < 120.0 for v in p["psi_passes"])
     # first rained particle: just beyond eq. 2.25 (tau_f ratio <= (2 m*/m_rain)^(1/3) at most), t ~ 4-6e3 yr
     assert np.all((p["t_first"] > 2e3 * 3.15576e7) & (p["t_first"] < 1e4 * 3.15576e7))
-    st = scenes.ch2_setup(1, 1e-4, True, ns_target=32, psi_est=p["psi"])
+    st = mc_setups.ch2_setup(1, 1e-4, True, ns_target=32, psi_est=p["psi"])
     assert st["m_rain_est"] == p["m_rain_est"]
     assert 1.0 < p["m_rain_est"] / _m_rain_epstein(st, p["psi"]) <= 10 ** (1 / 40) * (1 + 1e-12)

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 import jax.numpy as jnp
 
+import jaxcoag
 from jaxcoag import kernels
+from jaxcoag._status import RESULT_NAMES, result_code
 from jaxcoag._validate import JaxcoagInputError
-from jaxcoag.binned import RESULT_NAMES, RESULTS, MassGrid, monodisperse, result_code, solve_binned
+from jaxcoag.binned import MassGrid, monodisperse
 from jaxcoag.sweep import parameter_points, sweep
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -21,9 +23,9 @@ N0 = jnp.asarray(monodisperse(G, 1.0, 1.0))
 
 
 def box(k0, t_end):
-    """Constant kernel k0 [cm^3 s^-1], outputs at 0, t_end/2, t_end [s]; t_end = 1e8 s exceeds max_steps."""
-    return solve_binned(kernels.Constant(k0), G, N0, jnp.stack([0.0, 0.5 * t_end, t_end]),
-                        max_steps=60, throw=False)
+    """Constant kernel k0 [cm^3 s^-1] from t0 = 0, outputs at 0, t_end/2, t_end [s]; t_end = 1e8 s exceeds max_steps."""
+    return jaxcoag.evolve(kernels.Constant(k0), jaxcoag.Binned(G, max_steps=60), N0,
+                          jnp.stack([0.0, 0.5 * t_end, t_end]), throw=False)
 
 
 @pytest.fixture(scope="module")
@@ -40,18 +42,22 @@ def test_sweep_dataset_round_trips_netcdf(ds, tmp_path):
 
 
 def test_sweep_equals_loop_and_failed_member(ds):
-    assert dict(ds.sizes) == {"k0": 3, "t_end": 3, "time": 3, "mass": G.nbins, "mass_edge": G.nbins + 1}
-    np.testing.assert_array_equal(ds["mass"].values, G.centers)
-    np.testing.assert_array_equal(ds["time"].values if "time" in ds.coords else ds["t"].values[0, 0], [0, 0.5, 1.0])
+    assert dict(ds.sizes) == {"k0": 3, "t_end": 3, "t": 3, "m": G.nbins, "m_edge": G.nbins + 1}
+    np.testing.assert_allclose(ds["m"].values, G.centers, rtol=1e-15)
+    np.testing.assert_array_equal(ds["m_edge"].values, G.edges)
+    assert "t" not in ds.coords  # the members' output times differ: t_out beside the parameters
+    np.testing.assert_array_equal(ds["t_out"].values[0, 0], [0, 0.5, 1.0])
+    np.testing.assert_array_equal(ds["t_out"].values[2, 2], [0, 0.5e8, 1e8])
+    assert ds["mass_per_bin"].dims == ("k0", "t_end", "t", "m") and ds["gel_mass"].dims == ("k0", "t_end", "t")
     mx = RESULT_NAMES.index("max_steps_reached")
     for i, k0 in enumerate([0.5, 1.0, 2.0]):
         for j, te in enumerate([1.0, 10.0, 1e8]):
             s = box(k0, te)
             st = int(ds["status"][i, j])
-            assert st == int(result_code(s.result))
+            assert st == int(result_code(s.status))
             if te < 1e3:
                 assert st == 0
-                np.testing.assert_allclose(ds["mass_per_bin"].values[i, j], np.asarray(s.mass_per_bin),
+                np.testing.assert_allclose(ds["mass_per_bin"].values[i, j], np.asarray(s.mass_per_bin()),
                                            rtol=1e-10, atol=1e-14)
                 assert int(ds["steps"][i, j]) == int(s.stats["steps"])
             else:
@@ -111,13 +117,14 @@ SHARD_SCRIPT = textwrap.dedent("""
     import numpy as np, jax.numpy as jnp
     sys.path.insert(0, {root!r})
     from jaxcoag import kernels
-    from jaxcoag.binned import MassGrid, monodisperse, solve_binned
+    import jaxcoag
+    from jaxcoag.binned import MassGrid, monodisperse
     from jaxcoag.sweep import sweep
     G = MassGrid.log(10 ** (-0.5 / 4), 1e3, 4)
     N0 = jnp.asarray(monodisperse(G, 1.0, 1.0))
     def box(k0, t_end):
-        return solve_binned(kernels.Constant(k0), G, N0, jnp.stack([0.0, 0.5 * t_end, t_end]),
-                            max_steps=60, throw=False)
+        return jaxcoag.evolve(kernels.Constant(k0), jaxcoag.Binned(G, max_steps=60), N0,
+                              jnp.stack([0.0, 0.5 * t_end, t_end]), throw=False)
     p = {{"k0": [0.5, 1.0, 2.0], "t_end": [1.0, 1e8]}}        # 6 members on 4 devices: padded to 8
     a = sweep(box, p)
     b = sweep(box, p, devices=jax.devices())
@@ -187,10 +194,10 @@ def test_nebula_32x32_sweep_equals_loop():
     lc = jnp.asarray(model.grid.log_centers)
 
     def neb(alpha, rho_g):
-        sol = model.solve({"alpha": alpha, "rho_g": rho_g}, adjoint=adj)
-        rho = sol.mass_per_bin[-1]
+        res = model.solve({"alpha": alpha, "rho_g": rho_g}, adjoint=adj)
+        rho = res.mass_per_bin()[-1]
         return {"ln_mpeak": jnp.log(diagnostics.mass_peak(rho, model.grid)),
-                "mean_ln_m": jnp.sum(rho * lc) / jnp.sum(rho), "result": sol.result}
+                "mean_ln_m": jnp.sum(rho * lc) / jnp.sum(rho), "result": res.status}
 
     params = {"alpha": np.logspace(np.log10(3e-5), np.log10(3e-4), 32),
               "rho_g": float(model.rho_g) * np.logspace(-0.3, 0.3, 32)}
@@ -206,3 +213,34 @@ def test_nebula_32x32_sweep_equals_loop():
     # physics: growth speeds up with alpha (turbulent relative velocities) and with rho_g (dust density)
     mean = out["mean_ln_m"].values
     assert np.all(np.diff(mean, axis=0) > 0) and np.all(np.diff(mean, axis=1) > 0)
+
+
+@pytest.mark.slow
+def test_monte_carlo_sweep_over_keys():
+    """The Monte Carlo engine sweeps like the binned one (vmapped over random keys, fixed bins):
+    each member equals its own run, and the number density follows the constant-kernel solution
+    n(t) = n0 / (1 + K n0 t / 2) (Smoluchowski 1916) within the sampling noise."""
+    from jaxcoag import mc
+    import jax
+
+    edges = 2.0 ** np.arange(0, 12)  # [g]: monomers of 1 g up to 2048 g
+    t_out = jnp.array([0.0, 1.0, 2.0])
+
+    def run(seed):
+        key = jax.random.fold_in(jax.random.key(5), seed.astype(jnp.uint32))
+        return jaxcoag.evolve(kernels.Constant(1.0), mc.MonteCarlo(n_particles=400), jaxcoag.Monodisperse(1.0, 1.0),
+                              t_out, key=key, throw=False)
+
+    ds = sweep(run, {"seed": np.arange(4.0)}, edges=edges)
+    assert dict(ds.sizes) == {"seed": 4, "t": 3, "m": 11, "m_edge": 12}
+    np.testing.assert_array_equal(ds["t"].values, [0.0, 1.0, 2.0])
+    assert ds["status"].values.tolist() == [0] * 4 and ds.attrs["n_failed"] == 0
+    one = run(jnp.asarray(2.0))
+    np.testing.assert_array_equal(ds["mass_per_bin"].values[2], np.asarray(one.mass_per_bin(edges)))
+    np.testing.assert_array_equal(ds["number_per_bin"].values[2], np.asarray(one.number_per_bin(edges)))
+    # every grain is inside the bins: the binned mass is the initial dust density 1 g cm^-3
+    np.testing.assert_allclose(ds["mass_per_bin"].values.sum(axis=-1), 1.0, rtol=1e-12)
+    n = ds["number_per_bin"].values.sum(axis=-1).mean(axis=0)
+    np.testing.assert_allclose(n, 1.0 / (1.0 + 0.5 * np.array([0.0, 1.0, 2.0])), atol=0.05)
+    with pytest.raises(JaxcoagInputError, match="edges="):
+        sweep(run, {"seed": [0.0]})

@@ -1,8 +1,8 @@
 """Abstract interface of a binned Smoluchowski discretisation ("scheme").
 
 A scheme turns the continuous coagulation(-fragmentation) equation on a :class:`MassGrid`
-into an ODE ``dy/dt = rhs(t, y, data)`` for a 1-D state vector ``y``. The driver
-:func:`jaxcoag.binned.solve_binned` only talks to schemes through this interface, so new
+into an ODE ``dy/dt = rhs(t, y, data)`` for a 1-D state vector ``y``. The binned
+engine (:class:`jaxcoag.Binned`) only talks to schemes through this interface, so new
 discretisations (two-bin, discontinuous Galerkin, ...) plug in without touching the driver.
 
 Contract (all methods pure; no Python loops over bins in traced code):
@@ -18,7 +18,7 @@ Contract (all methods pure; no Python loops over bins in traced code):
   JAX pytree whose float leaves are computed from the kernel's leaves (this is what carries
   gradients to alpha, rho_g, v_frag, ...). Index arrays built from the (static) grid may be
   numpy constants. ``fragmentation`` is ``None`` (pure coagulation) or a
-  ``jaxcoag.binned.fragmentation.AbstractFragmentation``; a scheme that cannot handle it
+  binned-capable ``jaxcoag.outcomes.AbstractOutcome`` (hooks ``probability``/``twobin_data``); a scheme that cannot handle it
   raises a clear ``TypeError`` at Python (trace) time saying which scheme to use instead.
 * ``rhs(t, y, data) -> dy/dt``: same shape/dtype as ``y``.
 * ``mass_per_bin(y, grid) -> (nbins,)`` mass density per bin [g cm^-3].
@@ -74,7 +74,7 @@ def estimate_bytes(scheme, nbins, *, order=0, fragmentation=False, implicit=Fals
         nbins: number of bins N.
         order: DG polynomial degree k (ignored for twobin; taken from a DGScheme instance).
         fragmentation: the fragmentation model, True, or None/False (twobin: its pair tensors and
-            N x N weights; an OutcomeFragmentation also holds (Np, N) fragment weights).
+            N x N weights; a RecipeOutcome also holds (Np, N) fragment weights).
         implicit: an implicit solver (Kvaerno5, LinearlyImplicitEuler) builds the dense Jacobian
             by forward mode: every pair tensor is carried for all len(y) tangents (O(N^3)).
 
@@ -90,7 +90,7 @@ def estimate_bytes(scheme, nbins, *, order=0, fragmentation=False, implicit=Fals
         b = _TWOBIN_PAIR * pairs
         if fragmentation is not None and fragmentation is not False:
             b += _TWOBIN_FRAG_PAIR * pairs + 8.0 * N * N
-            if type(fragmentation).__name__ == "OutcomeFragmentation":
+            if type(fragmentation).__name__ == "RecipeOutcome":
                 b += 8.0 * pairs * N  # fragment weights W (Np, N)
         if implicit:
             b += _JAC_PAIR_TANGENT * pairs * (N + 1.0)

@@ -1,7 +1,8 @@
 """DustPy-parity linearly-implicit (Rosenbrock-)Euler solver for diffrax.
 
 One step from y_n with step h:  (I - h J) dy = h f(t_n, y_n),  y_{n+1} = y_n + dy, with the
-dense Jacobian J = df/dy at y_n (``jax.jacfwd``) and one LU solve - DustPy's implicit
+dense Jacobian J = df/dy at y_n (``jax.jacfwd``) and one LU factorisation (lineax ``LU``, its
+state reused for the error estimate) - DustPy's implicit
 first-order scheme (Stammler & Birnstiel 2022, §3.2). It is L-stable for linear problems and
 keeps steps bounded by accuracy, not by stiffness (fragmentation equilibria).
 
@@ -22,8 +23,8 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 import diffrax
+import lineax as lx
 from diffrax import LocalLinearInterpolation
 
 __all__ = ["LinearlyImplicitEuler"]
@@ -57,14 +58,15 @@ class LinearlyImplicitEuler(diffrax.AbstractAdaptiveSolver):
         f = lambda y: terms.vf(t0, y, args)
         f0, jvp_fn = jax.linearize(f, y0)
         J = jax.vmap(jvp_fn, in_axes=1, out_axes=1)(jnp.eye(y0.shape[0], dtype=y0.dtype))
-        A = jnp.eye(y0.shape[0], dtype=y0.dtype) - h * J
-        lu = jsl.lu_factor(A)
-        dy = jsl.lu_solve(lu, h * f0)
+        A = lx.MatrixLinearOperator(jnp.eye(y0.shape[0], dtype=y0.dtype) - h * J)
+        lu = lx.LU()
+        lu_state = lu.init(A, {})  # one LU factorisation, reused for the error estimate
+        dy = lx.linear_solve(A, h * f0, lu, state=lu_state, throw=False).value
         y1 = y0 + dy
         ok = jnp.all(jnp.isfinite(y1))
         if self.error_estimate:
             f1 = terms.vf(t1, y1, args)
-            err = jsl.lu_solve(lu, 0.5 * h * (f1 - f0))
+            err = lx.linear_solve(A, 0.5 * h * (f1 - f0), lu, state=lu_state, throw=False).value
             # a non-finite trial step is rejected by the controller (infinite error) instead of
             # terminating the solve
             err = jnp.where(ok, err, jnp.inf)

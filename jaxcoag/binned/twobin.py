@@ -160,8 +160,8 @@ class TwoBinScheme(AbstractScheme):
     def precompute(self, kernel, grid, fragmentation=None):
         """Kernel on all pairs (log space, overflow-free) + fragmentation tensors.
 
-        Arguments: kernel (AbstractKernel), grid (MassGrid), fragmentation (None or an
-        AbstractFragmentation). Returns: TwoBinData.
+        Arguments: kernel (AbstractKernel), grid (MassGrid), fragmentation (None or a binned-capable
+        ``jaxcoag.outcomes`` outcome: hooks ``probability``/``twobin_data``). Returns: TwoBinData.
         """
         iL, iS, idx, coef = coagulation_tensors(grid)
         lc = jnp.asarray(grid.log_centers)
@@ -188,7 +188,7 @@ class TwoBinScheme(AbstractScheme):
             contrib = data.coef * P[:, None]
             out = jax.ops.segment_sum(contrib.ravel(), jnp.asarray(data.idx).ravel(), num_segments=N + 1)
         elif getattr(data.frag, "full", False):
-            # the fragmentation data describe every collision (e.g. OutcomeFragmentation
+            # the fragmentation data describe every collision (e.g. RecipeOutcome
             # without a mixture weight): no separate sticking part
             out = data.frag.rhs(P, N)
         else:

@@ -129,7 +129,7 @@ def zoom_cap_tail(w, z, valid, log_rate, t, log_wmax, n_events=1.0):
     expected outflow, so the front advances with the true tail counts and the heaviest
     particles become single (z = 0) where g r t < 1. It costs ≈ n_events group events per
     capped species per elapsed time t. The lower bound z ≥ log2(g_i / W_max) (W_max =
-    ``mc.run``'s tail_wmax, default Ng*) keeps a bulk species at ≤ W_max groups at t → 0.
+    ``Distribution(tail_wmax=...)``, default Ng*) keeps a bulk species at ≤ W_max groups at t → 0.
 
     At t = 0 the cap is the floor itself (as many groups as W_max allows).
 
@@ -223,7 +223,7 @@ def merge_pairs(m, logm, psi, w, z, valid, n_merge, p_protect: int, weighting: s
     elif weighting in ("mass", "volume"):
         qA = pA * m[A] / m_new
         qB = pB * m[B] / m_new
-    else:  # pragma: no cover - validated at run()
+    else:  # pragma: no cover - validated by MonteCarlo(...)
         raise ValueError(f"unknown merge_weighting {weighting!r}")
     psi_new = qA[:, None] * psi[A] + qB[:, None] * psi[B]
     z_new = jnp.minimum(z[A], z[B])

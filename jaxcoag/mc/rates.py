@@ -49,7 +49,7 @@ def n_eps(z_a, z_b, logm_a, logm_b, log2_feps, rounding: str = "ceil"):
         n = jnp.ceil(x - 1e-9)
     elif rounding == "floor":
         n = jnp.floor(x + 1e-9)
-    else:  # pragma: no cover - validated at run()
+    else:  # pragma: no cover - validated by MonteCarlo(...)
         raise ValueError(f"unknown neps_rounding {rounding!r}")
     n = jnp.clip(n, 0.0, dz.astype(x.dtype))
     return n.astype(jnp.int32)

@@ -4,6 +4,9 @@ Every species slot carries (m, log m, psi, w, z, valid); invalid slots hold the 
 m = 1, w = 0, z = 0. The multiplicity is g = w 2^z (never formed when it could overflow:
 use log g = log w + z ln 2).
 
+The run's raw bit flags (:class:`STATUS`) are an internal detail: results carry one
+:class:`jaxcoag.RESULTS` item (:func:`flags_to_code`), and the flags only as ``MCResult.flags``.
+
 References: Ormel (2008) thesis Table 5.4 (state vector per species); snapshots and MC
 hazards (status flags) in docs/design_notes.md.
 """
@@ -20,14 +23,15 @@ import numpy as np
 
 from .._validate import JaxcoagInputError, check, is_traced
 
-__all__ = ["STATUS", "MCState", "Snapshots", "status_names", "largest_two", "log_n_particles",
+__all__ = ["STATUS", "MCState", "Snapshots", "flag_names", "flags_to_code", "largest_two", "log_n_particles",
            "InitialSpecies", "initial_species", "AbstractStop", "Runaway"]
 
 LN2 = float(jnp.log(2.0))
 
 
 class STATUS:
-    """Bit flags of ``MCResult.status`` (failures are values, so vmapped sweeps keep going).
+    """Raw bit flags of a Monte Carlo run (internal; ``MCResult.flags``). A result reports one
+    :class:`jaxcoag.RESULTS` item instead (:func:`flags_to_code`).
 
     OK: ran to the last output time. CAPACITY: free species slots ran out, an emergency merge
     was done (results remain consistent but are smoothed; raise ``capacity``). ZERO_RATE: the
@@ -35,7 +39,7 @@ class STATUS:
     the final state, which is exact. NONFINITE: a non-finite total rate (kernel returned NaN
     or inf); the run stopped, later snapshots repeat the last good state. MAX_EVENTS: the
     event budget ``max_events`` was spent; later snapshots repeat that state (NOT the true
-    state at those times). STOPPED: the user stop predicate (``run(..., stop=...)``, e.g.
+    state at those times). STOPPED: the stop predicate (``MonteCarlo(stop=...)``, e.g.
     :class:`jaxcoag.mc.Runaway`) became true after an event at time ``MCResult.t_stop``; later
     snapshots repeat the stopped state (deliberately, NOT the true state at those times).
     """
@@ -50,11 +54,30 @@ class STATUS:
 
 _NAMES = ("CAPACITY", "ZERO_RATE", "NONFINITE", "MAX_EVENTS", "STOPPED")
 
+# flag -> RESULTS item, highest priority first (a run with several flags reports the first)
+_PRIORITY = (("NONFINITE", "nonfinite"), ("MAX_EVENTS", "max_steps_reached"), ("CAPACITY", "capacity_exceeded"),
+             ("STOPPED", "stopped"), ("ZERO_RATE", "zero_rate"))
 
-def status_names(code) -> list[str]:
-    """Names of the flags set in an integer status code (``[]`` means OK)."""
-    code = int(code)
-    return [n for n in _NAMES if code & getattr(STATUS, n)]
+
+def flag_names(flags) -> list[str]:
+    """Names of the bit flags set in an integer ``flags`` value (``[]`` means OK)."""
+    flags = int(flags)
+    return [n for n in _NAMES if flags & getattr(STATUS, n)]
+
+
+def flags_to_code(flags):
+    """Integer :class:`jaxcoag.RESULTS` code (int32, traceable, batched like ``flags``) of raw flags.
+
+    One item by priority: nonfinite > max_steps_reached (MAX_EVENTS) > capacity_exceeded >
+    stopped > zero_rate > successful.
+    """
+    from .._status import RESULT_NAMES
+
+    flags = jnp.asarray(flags, jnp.int32)
+    code = jnp.zeros(flags.shape, jnp.int32)
+    for flag, item in reversed(_PRIORITY):
+        code = jnp.where((flags & getattr(STATUS, flag)) != 0, jnp.int32(RESULT_NAMES.index(item)), code)
+    return code
 
 
 def log_n_particles(w, z, valid):
@@ -109,10 +132,14 @@ class Snapshots(NamedTuple):
     logV: jax.Array    # (T,) ln simulated volume [ln cm^3]
     M_tot: jax.Array   # (T,) total simulated mass [g]
     n_events: jax.Array  # (T,) events executed before the snapshot
+    status: jax.Array  # (T,) int32 raw flags (STATUS) at the snapshot
 
 
 class MCState(NamedTuple):
-    """Complete loop carry of one run (all leaves are arrays)."""
+    """Complete loop carry of one run (all leaves are arrays; what a checkpoint stores).
+
+    ``snaps`` is None between segments (the output buffers live only inside one advance).
+    """
 
     m: jax.Array
     logm: jax.Array
@@ -139,21 +166,24 @@ class MCState(NamedTuple):
     done: jax.Array
     n_dup: jax.Array
     n_merge: jax.Array
-    snaps: Snapshots
+    log_rho_d: jax.Array  # ln of the dust mass density rho_d = M_tot / V at t0 [ln(g cm^-3)], kept by const_n/const_ns
+    log_mlo: jax.Array    # ln of the lowest mass of the distribution-method bins [ln g]
+    snaps: Snapshots | None
 
 
 # ----------------------------------------------------------------------------- initial states
 
 class InitialSpecies(eqx.Module):
-    """A custom initial population for :func:`jaxcoag.mc.run` (``initial=``); build it with
-    :func:`initial_species`.
+    """A custom initial population for ``jaxcoag.evolve(kernel, MonteCarlo(...), initial, ...)``;
+    build it with :func:`initial_species`.
 
     Fields (Ns0 = number of initial species, P = structural parameters):
         m: (Ns0,) particle mass of each species [g].
         w: (Ns0,) group number (≥ 1); multiplicity g = w 2^z (eq. 5.8).
         z: (Ns0,) int32 zoom number (≥ 0).
-        psi: (Ns0, P) structural parameters.
-        V: simulated volume [cm^3], or None: then V = M_tot / rho_d (``run``'s ``rho_d``).
+        psi: (Ns0, P) structural parameters (P = 0: filled with the engine's monomer structure).
+        V: simulated volume [cm^3], or None: then V = M_tot / rho_d.
+        rho_d: dust mass density [g cm^-3] used when V is None (default 1).
 
     References: Ormel (2008) eq. (5.8), Table 5.4, App. 5.B.
     """
@@ -163,10 +193,11 @@ class InitialSpecies(eqx.Module):
     z: jax.Array
     psi: jax.Array
     V: jax.Array | None = None
+    rho_d: jax.Array | None = None
 
 
-def initial_species(m, g=None, *, log_g=None, w=None, z=None, psi=None, V=None) -> InitialSpecies:
-    """Initial population of several species for ``jaxcoag.mc.run(..., initial=...)``.
+def initial_species(m, g=None, *, log_g=None, w=None, z=None, psi=None, V=None, rho_d=None) -> InitialSpecies:
+    """Initial population of several species for ``jaxcoag.evolve(kernel, MonteCarlo(...), initial, t_out)``.
 
     Give the multiplicities in exactly one of three ways:
 
@@ -182,17 +213,21 @@ def initial_species(m, g=None, *, log_g=None, w=None, z=None, psi=None, V=None) 
     Arguments:
         m: (Ns0,) particle masses [g] (> 0, finite).
         g, log_g, w, z: multiplicities, see above.
-        psi: optional (Ns0, P) structural parameters (default: P = 0, or zeros of the kernel's
-            ``n_struct`` columns, filled in by ``run``).
-        V: simulated volume [cm^3] (> 0). Default None: V = M_tot / rho_d with the ``rho_d``
-            given to ``run`` (1 g cm^-3 unless set), M_tot = Σ g m. In const_n / const_ns the
-            controller keeps the mass density M_tot / V of the initial state.
+        psi: optional (Ns0, P) structural parameters (default: P = 0, filled in by the engine
+            with ``MonteCarlo.struct0`` for a kernel with ``n_struct`` > 0).
+        V: simulated volume [cm^3] (> 0). Default None: V = M_tot / rho_d, M_tot = Σ g m. In
+            const_n / const_ns the controller keeps the mass density M_tot / V of the initial state.
+        rho_d: dust mass density [g cm^-3] (> 0) that sets V when V is not given (default 1);
+            give V or rho_d, not both.
 
     Returns:
         :class:`InitialSpecies`.
 
     References: Ormel (2008) eqs. (5.8)-(5.9), Table 5.4, App. 5.A.
     """
+    if V is not None and rho_d is not None:
+        raise JaxcoagInputError("initial_species: give either V= (simulated volume in cm^3) or rho_d= (dust mass "
+                                "density in g cm^-3, V = M_tot / rho_d), not both")
     given = [x is not None for x in (g, log_g)] + [w is not None or z is not None]
     if sum(given) != 1:
         raise JaxcoagInputError("initial_species needs exactly one of g=, log_g= or (w=, z=) for the multiplicities")
@@ -230,16 +265,17 @@ def initial_species(m, g=None, *, log_g=None, w=None, z=None, psi=None, V=None) 
         if psi_.ndim != 2 or psi_.shape[0] != n:
             raise JaxcoagInputError(f"initial_species: psi must have shape ({n}, P); got {psi_.shape}")
     V_ = None if V is None else check(V, "V", positive=True, hint="give the simulated volume in cm^3 (> 0)")
-    return InitialSpecies(m=m, w=jnp.asarray(w_, m.dtype), z=z_, psi=psi_, V=V_)
+    rho_ = None if rho_d is None else check(rho_d, "rho_d", positive=True, hint="give the dust mass density in g cm^-3 (> 0)")
+    return InitialSpecies(m=m, w=jnp.asarray(w_, m.dtype), z=z_, psi=psi_, V=V_, rho_d=rho_)
 
 
 # ----------------------------------------------------------------------------- stop predicates
 
 class AbstractStop(eqx.Module):
-    """A stop predicate for ``run(..., stop=...)``: ``__call__(state: MCState) -> bool``.
+    """A stop predicate for ``MonteCarlo(stop=...)``: ``__call__(state: MCState) -> bool``.
 
     It is evaluated on the state after every event (and on the initial state); when it returns
-    True the run stops with ``STATUS.STOPPED``, ``MCResult.t_stop`` is the time of that event
+    True the run stops with status ``RESULTS.stopped``, ``MCResult.t_stop`` is the time of that event
     and later snapshots repeat the stopped state. Must be jittable and vmappable (no Python
     control flow on state values). Any plain function of the state works as well.
     """

@@ -3,14 +3,19 @@
 Submodules: :mod:`gas` (disk / cloud state), :mod:`drag` (radii, friction time, Stokes number),
 :mod:`drift` (Brownian, radial/azimuthal drift, settling), :mod:`turbulence` (Ormel & Cuzzi
 2007), :mod:`collision` (cross-sections, focusing, kernel sigma*dv), :mod:`fragmentation`
-(fragmentation probabilities), :mod:`safe` (safe math), and the collision-outcome physics
-(:mod:`contact`, :mod:`porosity`, :mod:`outcomes`, :mod:`recipes`).
+(fragmentation probabilities), :mod:`safe` (safe math), and the collision-outcome physics:
+:mod:`contact` (JKR contact energies), :mod:`porosity` (enlargement factor psi),
+:mod:`outcome` (the shared Outcome container, fragment power laws), one module per paper
+recipe: :mod:`ormel07` (thesis ch. 2), :mod:`ormel08` (thesis ch. 4), :mod:`recipes` (thesis
+ch. 6 tables, O09), :mod:`dominik_tielens` (DT97 energy thresholds), :mod:`wada07` (Wada et
+al. 2007 fitted laws). The engine-facing outcome classes are in :mod:`jaxcoag.outcomes`.
 
 The public functions re-exported here validate their inputs; hot paths use the modules'
 unvalidated ``_``-prefixed twins.
 """
 
-from . import collision, contact, drag, drift, fragmentation, gas, outcomes, porosity, recipes, safe, turbulence
+from . import (collision, contact, dominik_tielens, drag, drift, fragmentation, gas, ormel07, ormel08, outcome, porosity,
+               recipes, safe, turbulence, wada07)
 from .collision import cross_section, escape_velocity2, focusing_factor, kernel_sigma_dv
 from .drag import (
     compact_radius,
@@ -45,6 +50,9 @@ from .turbulence import (
     vpg2_oc07,
 )
 from .contact import Material
-from .outcomes import DTEnergy, Outcome, ShatterAtMass, o07_outcome, o08_outcome
+from .dominik_tielens import DTEnergy
+from .ormel07 import o07_outcome
+from .ormel08 import o08_outcome
+from .outcome import Outcome
 from .porosity import psi_compaction, psi_hit_and_stick
 from .recipes import RecipeTables, o09_outcome

@@ -40,7 +40,7 @@ import numpy as np
 
 from .._validate import JaxcoagInputError
 from .contact import Material
-from .outcomes import Outcome, mix_outcomes
+from .outcome import Outcome, mix_outcomes
 from .porosity import (_chk, _outer_radius_ratio, _phi_hit_and_stick_o09, _reduced_mass,
                        smooth_step)
 from .safe import safe_log
@@ -486,7 +486,7 @@ def o09_outcome(m1, psi1, m2, psi2, dv, tables: RecipeTables, mat: Material, *, 
         hs_form: static "B"/"A" (eq. 6.24 reading); log_eps: static interpolation option.
         kappa_glob, mass_ratio_glob, hs_factor, phi_max: recipe constants (see above).
             Fragment structure psi(N) = 1/min(1, c_f N^-0.33) is applied by the consumer
-            (:func:`jaxcoag.physics.outcomes.psi_fragment`).
+            (:func:`jaxcoag.physics.outcome.psi_fragment`).
         width: static regime-switch width in e-folds (0 = sources).
         validate: static; False skips input checks.
 
