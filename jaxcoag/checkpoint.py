@@ -63,7 +63,7 @@ __all__ = ["fingerprint", "run_fingerprint", "save", "load", "read_info", "run_s
 #: Format tag of the files written by :func:`save` (a file with another tag is refused).
 FORMAT = "jaxcoag-checkpoint-v2"
 
-_TODO = "delete it or start afresh (jaxcoag run without --resume; evolve(..., resume=False))"
+_REMEDY = "delete it or start afresh (jaxcoag run without --resume; evolve(..., resume=False))"
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -350,11 +350,11 @@ def _read(path):
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
         why = "not an npz archive" if "pickle" in str(e) else _one_line(e)  # numpy: unknown magic = "pickled"
         raise JaxcoagInputError(f"checkpoint {path} is truncated or not a jaxcoag checkpoint ({why}); "
-                                f"{_TODO}.") from e
+                                f"{_REMEDY}.") from e
     fmt = d.get("format")
     if fmt is None or fmt.ndim != 0 or fmt.dtype.kind != "U" or str(fmt) != FORMAT:
         raise JaxcoagInputError(f"{path} is not a {FORMAT} file (another program's npz or an older jaxcoag "
-                                f"checkpoint); {_TODO}, or point --checkpoint at another file.")
+                                f"checkpoint); {_REMEDY}, or point --checkpoint at another file.")
     scal = ("fingerprint", "n_done", "checksum")
     lists = ("paths", "dtypes", "key_impls", "finite")
     bad = [k for k in scal if k not in d or d[k].ndim != 0] + [k for k in lists if k not in d or d[k].ndim != 1]
@@ -362,17 +362,17 @@ def _read(path):
         n = d["paths"].shape[0]
         bad = [k for k in lists if d[k].shape[0] != n] + [f"leaf_{i:05d}" for i in range(n) if f"leaf_{i:05d}" not in d]
     if bad:
-        raise JaxcoagInputError(f"checkpoint {path} is incomplete or inconsistent (fields {bad[:4]}); {_TODO}.")
+        raise JaxcoagInputError(f"checkpoint {path} is incomplete or inconsistent (fields {bad[:4]}); {_REMEDY}.")
     paths = [str(p) for p in d["paths"]]
     datas = [d[f"leaf_{i:05d}"] for i in range(len(paths))]
     nan = [p for p, a, fin in zip(paths, datas, d["finite"])
            if fin and a.dtype.kind in "fc" and not np.all(np.isfinite(a))]
     if nan:
         raise JaxcoagInputError(f"checkpoint {path} holds NaN/inf in {nan[:3]} where the run wrote finite numbers "
-                                f"(a corrupted file); {_TODO}.")
+                                f"(a corrupted file); {_REMEDY}.")
     if _checksum(paths, datas) != str(d["checksum"]):
         raise JaxcoagInputError(f"checkpoint {path} is corrupted (its data fail the sha256 checksum written with "
-                                f"them); {_TODO}.")
+                                f"them); {_REMEDY}.")
     return d, paths, datas
 
 
@@ -457,7 +457,7 @@ def load(path, *, fingerprint, like_state, like_outs):
             if problem:
                 break
     if problem:
-        raise JaxcoagInputError(f"checkpoint {path} does not fit this run ({problem}); {_TODO}.")
+        raise JaxcoagInputError(f"checkpoint {path} does not fit this run ({problem}); {_REMEDY}.")
     leaves = [_restore(a, str(impl), like) for a, impl, (_, like) in
               zip(datas, d["key_impls"], _flat(like_state, "state") + _flat(like_outs, "outs"))]
     ns = len(_flat(like_state, "state"))
@@ -557,7 +557,7 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
         ck = load(path, fingerprint=fp, like_state=state, like_outs=like_outs)
         n_done = ck["n_done"]
         if n_done > T:
-            raise JaxcoagInputError(f"checkpoint {path} holds {n_done} outputs, this run has {T}; {_TODO}.")
+            raise JaxcoagInputError(f"checkpoint {path} holds {n_done} outputs, this run has {T}; {_REMEDY}.")
         if n_done:
             state, outs = ck["state"], ck["outs"]
             walls = [float(w) for w in np.atleast_1d(ck["meta"].get("wall_s", []))]
