@@ -40,15 +40,9 @@ def rebin_matrix(log_edges_from, log_edges_to):
 
 def _fragmentation(outcome):
     """The binned fragmentation hook object of ``outcome`` (None for pure sticking)."""
-    if outcome is None:
-        return None
-    try:
-        from ..outcomes import Sticking
-    except ImportError:  # pragma: no cover - during the outcome unification
-        Sticking = ()
-    if Sticking and isinstance(outcome, Sticking):
-        return None
-    return outcome
+    from ..outcomes import Sticking  # lazy: jaxcoag.outcomes imports the binned redistribution
+
+    return None if outcome is None or isinstance(outcome, Sticking) else outcome
 
 
 class Binned(AbstractEngine):

@@ -19,8 +19,8 @@ import jax.numpy as jnp
 
 from .contact import Material
 from .dominik_tielens import AbstractFragModel, NoFragmentation
-from .outcome import Outcome, bounce_outcome, mix_outcomes
-from .porosity import _chk, DELTA_CCA, _psi_o07, _reduced_mass, smooth_step
+from .outcome import Outcome, pair_inputs, bounce_outcome, mix_outcomes
+from .porosity import DELTA_CCA, _psi_o07, _reduced_mass, smooth_step
 from .safe import safe_log
 
 __all__ = ["o07_outcome", "BounceWhenCompact"]
@@ -76,14 +76,7 @@ def o07_outcome(m1, psi1, m2, psi2, dv, mat: Material, *, delta=DELTA_CCA, B=1.0
     References: Ormel 2008 thesis eqs. 2.9, 2.13-2.19 and fn. 7, Tab. 1.1; Dominik &
     Tielens 1997; Wada et al. 2007 §5.5; errata 5, 6, 20 in docs/design_notes.md.
     """
-    if validate:
-        m1 = _chk(m1, "m1", positive=True, hint="masses are in grams")
-        m2 = _chk(m2, "m2", positive=True, hint="masses are in grams")
-        psi1 = _chk(psi1, "psi1", positive=True, hint="psi = V/V* >= 1 (1 = compact)")
-        psi2 = _chk(psi2, "psi2", positive=True, hint="psi = V/V* >= 1 (1 = compact)")
-        dv = _chk(dv, "dv", nonnegative=True, hint="relative velocity in cm/s")
-    else:  # arrays, so that filter_jit traces them instead of treating floats as static
-        m1, psi1, m2, psi2, dv = (jnp.asarray(x, dtype=jnp.result_type(float)) for x in (m1, psi1, m2, psi2, dv))
+    m1, psi1, m2, psi2, dv = pair_inputs(m1, psi1, m2, psi2, dv, validate)
     # recipe constants as traced leaves: no recompilation when their values change
     delta, B, mF_over_m0, restr_factor, psi_min = (
         jnp.asarray(x, dtype=jnp.result_type(float)) for x in (delta, B, mF_over_m0, restr_factor, psi_min))

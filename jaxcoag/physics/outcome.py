@@ -118,6 +118,18 @@ class Outcome(eqx.Module):
         return one + two + r["M_pwl"] * psi_fragment(mbar / m0, c_f)
 
 
+def pair_inputs(m1, psi1, m2, psi2, dv, validate: bool):
+    """Masses [g], enlargement factors [-] and relative velocity [cm/s] of a colliding pair, checked
+    (``validate``: positive masses and psi, non-negative dv, with messages) or only cast to float
+    arrays (hot paths; arrays so that ``filter_jit`` traces them instead of treating floats as static)."""
+    if validate:
+        return (_chk(m1, "m1", positive=True, hint="masses are in grams"),
+                _chk(psi1, "psi1", positive=True, hint="psi = V/V* >= 1 (1 = compact)"),
+                _chk(m2, "m2", positive=True, hint="masses are in grams"),
+                _chk(psi2, "psi2", positive=True, hint="psi = V/V* >= 1 (1 = compact)"),
+                _chk(dv, "dv", nonnegative=True, hint="relative velocity in cm/s"))
+    return tuple(jnp.asarray(x, dtype=jnp.result_type(float)) for x in (m1, psi1, m2, psi2, dv))
+
 def collision_energy(m1, m2, dv):
     """Collision energy E = (1/2) m_mu dv^2 in the centre-of-mass frame.
 

@@ -40,7 +40,7 @@ import numpy as np
 
 from .._validate import JaxcoagInputError
 from .contact import Material
-from .outcome import Outcome, mix_outcomes
+from .outcome import Outcome, pair_inputs, mix_outcomes
 from .porosity import (_chk, _outer_radius_ratio, _phi_hit_and_stick_o09, _reduced_mass,
                        smooth_step)
 from .safe import safe_log
@@ -495,14 +495,7 @@ def o09_outcome(m1, psi1, m2, psi2, dv, tables: RecipeTables, mat: Material, *, 
 
     References: Ormel 2008 thesis §6.3-6.5, eqs. 6.17-6.30; errata 12-18 in docs/design_notes.md.
     """
-    if validate:
-        m1 = _chk(m1, "m1", positive=True, hint="masses are in grams")
-        m2 = _chk(m2, "m2", positive=True, hint="masses are in grams")
-        psi1 = _chk(psi1, "psi1", positive=True, hint="psi = V/V* >= 1 (1 = compact)")
-        psi2 = _chk(psi2, "psi2", positive=True, hint="psi = V/V* >= 1 (1 = compact)")
-        dv = _chk(dv, "dv", nonnegative=True, hint="relative velocity in cm/s")
-    else:
-        m1, psi1, m2, psi2, dv = (jnp.asarray(x, dtype=jnp.result_type(float)) for x in (m1, psi1, m2, psi2, dv))
+    m1, psi1, m2, psi2, dv = pair_inputs(m1, psi1, m2, psi2, dv, validate)
     if b_frac is not None:
         b_frac = _chk(b_frac, "b_frac", nonnegative=True, hint="b_frac = b/b_max in [0, 1], or None to average")
     kappa_glob, mass_ratio_glob, hs_factor, phi_max = (
