@@ -236,6 +236,7 @@ RUNAWAY_KW = dict(grouping=mc.Distribution(count_groups=10, tail_events=16, tail
                   capacity=512)
 
 
+@pytest.mark.slow  # 47 s; the default suite keeps the refinement on/off check test_count_groups_one_is_on
 def test_runaway_refinements_keep_the_sum_kernel_exact():
     """count_groups + tail_events only change z: the sum-kernel moments (M0 = e^{-t/2}, M2 = e^t)
     and exact mass conservation hold as for the thesis distribution method (N = 1e20)."""
