@@ -49,10 +49,11 @@ def main(argv=None):
               f"rho_g = {res.params['rho_g']:.5e} (rel err {err['rho_g']:+.2e}), {res.steps} steps, "
               f"loss {res.loss:.3e}, {dt:.1f} s incl. compile [{res.result}]")
         out[name] = dict(alpha=res.params["alpha"], rho_g=res.params["rho_g"], rel_err_alpha=err["alpha"],
-                         rel_err_rho_g=err["rho_g"], seconds=dt)
+                         rel_err_rho_g=err["rho_g"], seconds=dt, loss=float(res.loss), result=res.result,
+                         history=[float(v) for v in res.history])
     best = out["levenberg_marquardt"]
     out.update(alpha=best["alpha"], true_alpha=truth["alpha"], rel_err=abs(best["rel_err_alpha"]),
-               rel_err_rho_g=abs(best["rel_err_rho_g"]))
+               rel_err_rho_g=abs(best["rel_err_rho_g"]), target=[[float(v) for v in row] for row in target])
     print(f"recovered alpha={best['alpha']:.6e} true={truth['alpha']:.6e} rel_err={abs(best['rel_err_alpha']):.3e}")
     return out
 

@@ -2,15 +2,18 @@
 
 ``jaxcoag run [scene.toml | -] [--out FILE]``  the main job: a coagulation(-fragmentation) run of a TOML
                                            configuration (``-``: read it from stdin) with its engine
-                                           (``[run] engine = "binned" | "mc"``; default: the binned run of
-                                           growth and fragmentation at 1 AU in the MMSN, ``--engine mc``
-                                           its Monte Carlo twin); saves netCDF + figure panel, prints a
-                                           summary. Every engine writes the same netCDF layout.
+                                           (``[run] engine = "binned" | "mc" | "contact" | "rigid"``;
+                                           default: the binned run of growth and fragmentation at 1 AU in
+                                           the MMSN, ``--engine mc`` its Monte Carlo twin, ``--engine
+                                           contact`` a BCCA collision of the monomer DEM (Wada et al. 2007),
+                                           ``--engine rigid`` Richardson's (1995) box of colliding spheres);
+                                           saves netCDF + figure, prints a summary. The coagulation engines
+                                           write the same netCDF layout.
 ``jaxcoag plot FILE [--out PNG]``          re-plot a saved run.
 ``jaxcoag sweep [scene.toml] --param alpha=1e-4,1e-3 ...``  parameter sweep of a configuration (progress
                                            bar over the members; netCDF + figure of the final mass peak).
 ``jaxcoag --version``                      the installed version (importlib.metadata).
-``jaxcoag config [--engine mc] [--resolved]``  print the default configuration (a commented, runnable TOML
+``jaxcoag config [--engine E] [--resolved]``  print the default configuration (a commented, runnable TOML
                                            template: ``jaxcoag config --engine mc | jaxcoag run -``).
 ``jaxcoag demo``                           relative velocities and kernel of the ch. 4 nebula scene.
 
@@ -62,6 +65,8 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .config import ENGINES
+
     p = argparse.ArgumentParser(prog="jaxcoag", description="Differentiable dust coagulation in JAX. "
                                 "With no subcommand: `jaxcoag run` (the default 1 AU disk run).")
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
@@ -72,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "fragmentation); saves netCDF + figure")
     r.add_argument("config", nargs="?", default=None, help="TOML run configuration, or - to read it from stdin "
                    "(default: the built-in 1 AU MMSN run of --engine; `jaxcoag config` prints it)")
-    r.add_argument("--engine", choices=["binned", "mc"], default=None, help="without a file: the built-in default "
+    r.add_argument("--engine", choices=list(ENGINES), default=None, help="without a file: the built-in default "
                    "run of this engine (default binned); with a file: override its [run] engine")
     r.add_argument("--out", default=None, help="netCDF output file (default [output] path = jaxcoag_out/run.nc); "
                    "the figure goes next to it (.png)")
@@ -108,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: next to --out, e.g. sweep.png: final mass peak vs the parameters)")
 
     c = sub.add_parser("config", help="print the default run configuration (TOML with comments)")
-    c.add_argument("--engine", choices=["binned", "mc"], default="binned", help="the default run of this engine "
+    c.add_argument("--engine", choices=list(ENGINES), default="binned", help="the default run of this engine "
                    "(binned, or mc: a grouped Monte Carlo run of the same scene)")
     c.add_argument("--resolved", action="store_true", help="print every value incl. defaults instead")
 

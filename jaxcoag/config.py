@@ -11,7 +11,7 @@ disk run at 1 AU with growth and fragmentation, binned (``jaxcoag config``) or M
 
 Schema (units in brackets; "req." = required, otherwise the default is shown)::
 
-    [run]            name = "run", description = "", engine = "binned" | "mc"
+    [run]            name = "run", description = "", engine = "binned" | "mc" | "contact" | "rigid"
     [scene]          preset = "nebula_ch4"  (a jaxcoag.scenes.PRESETS name) | effects = [...]
                      (names from "brownian", "turbulence_oc07", "radial_drift",
                      "azimuthal_drift", "settling"; give preset OR effects),
@@ -48,6 +48,15 @@ Schema (units in brackets; "req." = required, otherwise the default is shown)::
                      merge_weighting = "mass" | "number" | "volume", leftover = "demagnify" |
                      "stochastic"; n_particles is required with engine = "mc" (an MRN start
                      puts n_particles monomer masses of dust in the simulated volume)
+    [contact]        engine = "contact" (jaxcoag.aggregates.contact; Wada et al. 2007): material =
+                     "ice" | "quartz", r1 = 1e-5 [cm], xi_crit = 2e-8 [cm], gamma [erg cm^-2], E
+                     [dyn cm^-2], nu, rho [g cm^-3] (overrides of the material), n = 64 (monomers
+                     per BCCA, a power of 2), dim = 2 | 3, seed = 0, v_imp [cm s^-1] or v_imp_v0 = 4
+                     [v0], impact_parameter = 0 [cm], dt_tc = 0.014 [t_c], t_end [s] (default: until
+                     the outcome settles), n_records = 200
+    [rigid]          engine = "rigid" (jaxcoag.aggregates.rigid; Richardson 1995, code units): model =
+                     "i" .. "v", n0, r0, t_end (Table I: 1000, 0.1, 8.2; model v 9000, 0.033, 40.8),
+                     box = 10, v0 = 1, seed = 0, n_out = 20
     [time]           t_end_yr [yr] (req. unless t_out_yr), n_out = 12, spacing = "log" |
                      "linear", t_first_yr = 1e-4 t_end_yr (log spacing); or t_out_yr = [...]
                      (strictly increasing, > 0). The run starts at t = 0 (1 yr = 3.15576e7 s).
@@ -55,7 +64,9 @@ Schema (units in brackets; "req." = required, otherwise the default is shown)::
                      checkpoint = "" (file; "" = none)
 
 ``[solver]`` is read by the binned engine only and ``[mc]`` by the Monte Carlo engine only, so
-``--set run.engine=mc`` switches an existing configuration between engines.
+``--set run.engine=mc`` switches an existing configuration between engines. [scene], [gas], [dust],
+[grid] and [time] are read (and [gas], [dust], [grid], [time] required) by the coagulation engines
+(binned, mc) only; the particle-level engines read [contact] or [rigid] (defaults when absent).
 
 Errors: an unknown section or key (with a "did you mean" suggestion and the allowed keys), a
 missing required parameter, a value of the wrong type, a negative / NaN / zero value where a
@@ -104,7 +115,11 @@ PosInt = Annotated[int, Field(gt=0)]
 NonNegInt = Annotated[int, Field(ge=0)]
 
 EFFECT_NAMES = ("brownian", "turbulence_oc07", "radial_drift", "azimuthal_drift", "settling")
-ENGINES = ("binned", "mc")
+ENGINES = ("binned", "mc", "contact", "rigid")
+#: engines of dust populations (they read [scene], [gas], [dust], [grid], [time]); the particle-level engines
+#: "contact" and "rigid" read their own section ([contact] / [rigid]) only
+COAGULATION_ENGINES = ("binned", "mc")
+COAGULATION_SECTIONS = ("gas", "dust", "grid", "time")
 
 
 class _Section(BaseModel):
@@ -116,7 +131,7 @@ class _Section(BaseModel):
 class RunSection(_Section):
     name: str = "run"
     description: str = ""
-    engine: Literal["binned", "mc"] = "binned"
+    engine: Literal["binned", "mc", "contact", "rigid"] = "binned"
 
 
 class SceneSection(_Section):
@@ -298,6 +313,61 @@ class MCSection(_Section):
         return self
 
 
+class ContactSection(_Section):
+    """[contact]: a head-on collision of two BCCA aggregates of monomers (Wada et al. 2007)."""
+
+    material: Literal["ice", "quartz"] = "ice"
+    r1: Pos = 1e-5
+    xi_crit: Pos = 2e-8
+    gamma: Optional[Pos] = None
+    E: Optional[Pos] = None
+    nu: Optional[float] = None
+    rho: Optional[Pos] = None
+    n: PosInt = 64
+    dim: Literal[2, 3] = 2
+    seed: NonNegInt = 0
+    v_imp: Optional[Pos] = None
+    v_imp_v0: Optional[Pos] = None
+    impact_parameter: NonNeg = 0.0
+    dt_tc: Pos = 0.014
+    t_end: Optional[Pos] = None
+    n_records: PosInt = 200
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.n & (self.n - 1) or self.n > 2 ** 17:
+            raise ValueError(f"[contact] n = {self.n!r} must be a power of 2 up to 2^17 (monomers per BCCA aggregate, "
+                             "e.g. 64 or 128).")
+        if self.v_imp is not None and self.v_imp_v0 is not None:
+            raise ValueError("[contact] give the impact speed as v_imp [cm/s] or v_imp_v0 [units of v0], not both.")
+        if self.nu is not None and not -1.0 < self.nu < 0.5:
+            raise ValueError(f"[contact] nu = {self.nu!r} must be a Poisson ratio in (-1, 0.5).")
+        if self.dt_tc > 0.2:
+            raise ValueError(f"[contact] dt_tc = {self.dt_tc!r} is above the leapfrog's stability limit 0.2 (time step "
+                             "in units of t_c; Wada et al. 2007 used 0.014, up to 0.112).")
+        return self
+
+
+#: default impact speed of [contact] in units of v0 (ice 2 A, 64 + 64: E_imp = 256 F_c delta_c, x_roll = 0.68,
+#: x_break = 1.3: restructuring, Wada et al. 2007 Table 1)
+CONTACT_DEFAULT_V_IMP_V0 = 4.0
+
+RIGID_MODELS = ("i", "ii", "iii", "iv", "v")
+
+
+class RigidSection(_Section):
+    """[rigid]: a periodic box of colliding rigid aggregates (Richardson 1995 Table I; code units)."""
+
+    model: Literal["i", "ii", "iii", "iv", "v"] = "i"
+    n0: Optional[PosInt] = None
+    r0: Optional[Pos] = None
+    box: Pos = 10.0
+    v0: Pos = 1.0
+    seed: NonNegInt = 0
+    t_end: Optional[Pos] = None
+    n_out: PosInt = 20
+
+
 class TimeSection(_Section):
     t_end_yr: Optional[Pos] = None
     n_out: PosInt = 12
@@ -339,17 +409,26 @@ class _Schema(BaseModel):
 
     run: RunSection = RunSection()
     scene: SceneSection = SceneSection()
-    gas: GasSection
-    dust: DustSection
-    grid: GridSection
+    gas: Optional[GasSection] = None
+    dust: Optional[DustSection] = None
+    grid: Optional[GridSection] = None
     fragmentation: Optional[FragmentationSection] = None
     solver: SolverSection = SolverSection()
     mc: MCSection = MCSection()
-    time: TimeSection
+    contact: Optional[ContactSection] = None
+    rigid: Optional[RigidSection] = None
+    time: Optional[TimeSection] = None
     output: OutputSection = OutputSection()
 
     @model_validator(mode="after")
     def _cross(self):
+        if self.run.engine not in COAGULATION_ENGINES:
+            return self
+        for name in COAGULATION_SECTIONS:
+            if getattr(self, name) is None:
+                need = [n for n, f in SECTIONS[name].model_fields.items() if f.is_required()]
+                raise ValueError(f"missing section [{name}] (needed by [run] engine = {self.run.engine!r}); it needs at "
+                                 f"least the keys {need}.")
         du, gr = self.dust, self.grid
         m0 = du.m0 if du.m0 is not None else 4.0 / 3.0 * math.pi * du.rho_s * du.a0 ** 3
         bpd = gr.bins_per_decade
@@ -374,8 +453,8 @@ SECTIONS = {name: _section_class for name, _section_class in
             ((n, typing.get_args(f.annotation)[0] if typing.get_args(f.annotation) else f.annotation)
              for n, f in _Schema.model_fields.items())}
 
-#: sections that must be present in a file
-REQUIRED_SECTIONS = tuple(n for n, f in _Schema.model_fields.items() if f.is_required())
+#: sections that must be present in a file of a coagulation engine (binned, mc)
+REQUIRED_SECTIONS = COAGULATION_SECTIONS
 
 #: scalar parameters a sweep may vary (they enter the compiled solve as array leaves)
 SWEEPABLE = ("gas.R_au", "gas.alpha", "gas.z_H", "gas.M_star_msun", "gas.rho_X", "gas.Sigma_g", "gas.T", "gas.n",
@@ -520,8 +599,11 @@ class RunConfig:
     def physics_hash(self) -> str:
         """sha256 of everything that determines the solution: the engine and the sections it reads
         (all but [run], [output] and the other engine's [solver] / [mc])."""
-        skip = ("run", "output", "mc" if self.engine == "binned" else "solver")
-        d = {k: v for k, v in self.data.items() if k not in skip}
+        if self.engine in COAGULATION_ENGINES:
+            skip = ("run", "output", "contact", "rigid", "mc" if self.engine == "binned" else "solver")
+            d = {k: v for k, v in self.data.items() if k not in skip}
+        else:
+            d = {self.engine: self.data[self.engine]}
         d["engine"] = self.engine
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=repr).encode()).hexdigest()
 
@@ -540,16 +622,31 @@ def _resolve(m: _Schema) -> dict:
     if sc["preset"] is None and sc["effects"] is None:
         sc["preset"] = "nebula_ch4"
     g = data["gas"]
-    if g["model"] == "molecular_cloud" and g["T"] is None:
+    if g is not None and g["model"] == "molecular_cloud" and g["T"] is None:
         g["T"] = 10.0
     du = data["dust"]
-    if du["m0"] is None:
-        du["m0"] = 4.0 / 3.0 * math.pi * du["rho_s"] * du["a0"] ** 3
-    else:
-        du["a0"] = (3.0 * du["m0"] / (4.0 * math.pi * du["rho_s"])) ** (1.0 / 3.0)
+    if du is not None:
+        if du["m0"] is None:
+            du["m0"] = 4.0 / 3.0 * math.pi * du["rho_s"] * du["a0"] ** 3
+        else:
+            du["a0"] = (3.0 * du["m0"] / (4.0 * math.pi * du["rho_s"])) ** (1.0 / 3.0)
     gr = data["grid"]
-    if gr["m_min"] is None:
+    if gr is not None and du is not None and gr["m_min"] is None:
         gr["m_min"] = du["m0"] / 10 ** (0.5 / gr["bins_per_decade"])
+    engine = data["run"]["engine"]
+    if engine == "contact" and data["contact"] is None:
+        data["contact"] = ContactSection().model_dump()
+    if engine == "rigid" and data["rigid"] is None:
+        data["rigid"] = RigidSection().model_dump()
+    ct = data["contact"]
+    if ct is not None and ct["v_imp"] is None and ct["v_imp_v0"] is None:
+        ct["v_imp_v0"] = CONTACT_DEFAULT_V_IMP_V0
+    rg = data["rigid"]
+    if rg is not None:  # Richardson (1995) Table I: models i-iv 1000 spheres of 0.1 to T = 8.2, model v 9000 of 0.033 to 40.8
+        big = rg["model"] == "v"
+        for k, v in (("n0", 9000 if big else 1000), ("r0", 0.033 if big else 0.1), ("t_end", 40.8 if big else 8.2)):
+            if rg[k] is None:
+                rg[k] = v
     mc = data["mc"]
     if mc["volume"] == "constant_species" and mc["controller"] is None:
         mc["controller"] = "mass" if mc["grouping"] == "equal_mass" else "species"
@@ -623,19 +720,22 @@ def load(path) -> RunConfig:
     return loads(text, source=p)
 
 
-_DEFAULT_FILES = {"binned": "default_run.toml", "mc": "default_mc_run.toml"}
+_DEFAULT_FILES = {"binned": "default_run.toml", "mc": "default_mc_run.toml", "contact": "default_contact_run.toml",
+                  "rigid": "default_rigid_run.toml"}
 
 
 def default_path(engine: str = "binned") -> str:
-    """Path of a shipped default configuration: ``jaxcoag/data/default_run.toml`` (binned) or
-    ``jaxcoag/data/default_mc_run.toml`` (Monte Carlo)."""
+    """Path of a shipped default configuration: ``jaxcoag/data/default_run.toml`` (binned),
+    ``default_mc_run.toml`` (Monte Carlo), ``default_contact_run.toml`` (a BCCA collision of the
+    contact DEM) or ``default_rigid_run.toml`` (Richardson 1995 model (i) box)."""
     if engine not in _DEFAULT_FILES:
         raise JaxcoagInputError(f"engine = {engine!r} is not one of {list(ENGINES)}.{_suggest(engine, ENGINES)}")
     return str(resources.files("jaxcoag").joinpath("data", _DEFAULT_FILES[engine]))
 
 
 def default(engine: str = "binned") -> RunConfig:
-    """The built-in default run (protoplanetary disk at 1 AU, growth + fragmentation) of an engine."""
+    """The built-in default run of an engine: the protoplanetary disk at 1 AU with growth and fragmentation
+    (binned, mc), a 64 + 64 ice BCCA collision (contact) or Richardson's model (i) box (rigid)."""
     cfg = load(default_path(engine))
     cfg.source = "<default>" if engine == "binned" else f"<default {engine}>"
     return cfg

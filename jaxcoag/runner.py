@@ -70,6 +70,10 @@ def quick_config(cfg: cfgmod.RunConfig) -> cfgmod.RunConfig:
     decade (m_min recomputed so the monomer sits at a bin centre), at most 8 outputs, and rtol >=
     1e-4 (binned) or [mc] ns_target <= 200 (Ns* / Ng*, Monte Carlo); the physics and the time span
     are unchanged."""
+    if cfg.engine not in cfgmod.COAGULATION_ENGINES:
+        from .aggregates.runs import quick_particles
+
+        return quick_particles(cfg)
     raw = cfg.raw()
     g = raw.setdefault("grid", {})
     g["bins_per_decade"] = min(float(cfg["grid"]["bins_per_decade"]), 3.0)
@@ -306,16 +310,16 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
     unreadable, corrupted or from another configuration (with ``resume``). Ctrl-C raises
     :class:`jaxcoag.checkpoint.RunInterrupted` after checkpointing the completed output times.
     """
-    from . import checkpoint as ckmod
-    from ._engine import evolve
     from ._status import FAILURES, RESULT_NAMES, result_code
     from .io import save_netcdf
 
     t_start = time.perf_counter()
     cfg = _as_config(cfg)
+    particles = cfg.engine not in cfgmod.COAGULATION_ENGINES
     if quick:
         cfg = quick_config(cfg)
-    cfgmod.check_memory(cfg)  # a grid too large for the memory: refused before anything else
+    if not particles:
+        cfgmod.check_memory(cfg)  # a grid too large for the memory: refused before anything else
     out = os.fspath(out) if out is not None else cfg["output"]["path"]
     if not out or out.endswith(os.sep) or os.path.isdir(out):
         raise JaxcoagInputError(f"--out must name a netCDF file (e.g. results/run.nc), got {out!r}.")
@@ -334,34 +338,16 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
         check_writable(out, "netCDF output", "--out")
         if checkpoint:
             check_writable(checkpoint, "checkpoint", "--checkpoint (or use --no-checkpoint)")
+    if particles:  # [run] engine = "contact" | "rigid": jaxcoag.aggregates
+        from .aggregates.runs import run_particles
+
+        return run_particles(cfg, out=out, checkpoint=checkpoint, resume=resume, progress=progress, figure=figure,
+                             max_segments=max_segments, verbose=verbose, save=save, t_start=t_start)
     built = cfgmod.build(cfg)
-    resumed_from = 0
-    if resume and checkpoint and os.path.exists(checkpoint):  # refuse a damaged file before writing anything
-        resumed_from = int(ckmod.read_info(checkpoint)["n_done"])
-    tmpdir = None
-    ck_run = checkpoint
-    if not save:
-        if resume and checkpoint and os.path.exists(checkpoint):  # continue on a copy: the file stays as it was
-            tmpdir = tempfile.mkdtemp(prefix="jaxcoag-run-")
-            ck_run = os.path.join(tmpdir, os.path.basename(checkpoint))
-            shutil.copyfile(checkpoint, ck_run)
-        else:
-            ck_run = None
-    elif checkpoint:  # the netCDF directory is made when the result is saved (none if interrupted)
-        _makedirs_for(checkpoint)
     n_seg = len(built.t_out)
-    try:
-        result = evolve(built.kernel, built.engine, built.initial, jnp.asarray(built.t_out), t0=0.0,
-                        outcome=built.outcome, key=built.key, checkpoint=ck_run, every=1,
-                        resume=bool(resume), progress=progress,
-                        max_segments=n_seg if max_segments is None else max_segments, throw=False)
-    except ckmod.RunInterrupted as e:
-        if not save:
-            e.checkpoint = None
-        raise
-    finally:
-        if tmpdir is not None:
-            shutil.rmtree(tmpdir, ignore_errors=True)
+    result, resumed_from = evolve_saved(built.kernel, built.engine, built.initial, built.t_out, outcome=built.outcome,
+                                        key=built.key, checkpoint=checkpoint, every=1, resume=resume,
+                                        progress=progress, max_segments=max_segments, save=save)
     if not save:
         checkpoint = None  # nothing was written
     rname = RESULT_NAMES[int(np.asarray(result_code(result.status)))]
@@ -400,6 +386,46 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
     if verbose:
         print(format_summary(res))
     return res
+
+
+def evolve_saved(kernel, engine, initial, t_out, *, outcome=None, key=None, checkpoint, every, resume, progress,
+                 max_segments, save):
+    """``jaxcoag.evolve`` from t = 0 as ``jaxcoag run`` does it, for every engine: a damaged checkpoint refused
+    (``resume``) before anything is written, the checkpoint's directory made, and with ``save=False`` nothing
+    written at all (a resumed run continues on a temporary copy of the checkpoint). Returns (result, outputs
+    already in the checkpoint when the run started). Ctrl-C raises :class:`jaxcoag.checkpoint.RunInterrupted`."""
+    import jax.numpy as jnp
+
+    from . import checkpoint as ckmod
+    from ._engine import evolve
+
+    resumed_from = 0
+    if resume and checkpoint and os.path.exists(checkpoint):  # refuse a damaged file before writing anything
+        resumed_from = int(ckmod.read_info(checkpoint)["n_done"])
+    tmpdir = None
+    ck_run = checkpoint
+    if not save:
+        if resume and checkpoint and os.path.exists(checkpoint):  # continue on a copy: the file stays as it was
+            tmpdir = tempfile.mkdtemp(prefix="jaxcoag-run-")
+            ck_run = os.path.join(tmpdir, os.path.basename(checkpoint))
+            shutil.copyfile(checkpoint, ck_run)
+        else:
+            ck_run = None
+    elif checkpoint:  # the netCDF directory is made when the result is saved (none if interrupted)
+        _makedirs_for(checkpoint)
+    n_seg = -(-len(t_out) // every)
+    try:
+        result = evolve(kernel, engine, initial, jnp.asarray(t_out), t0=0.0, outcome=outcome, key=key,
+                        checkpoint=ck_run, every=every, resume=bool(resume), progress=progress,
+                        max_segments=n_seg if max_segments is None else max_segments, throw=False)
+    except ckmod.RunInterrupted as e:
+        if not save:
+            e.checkpoint = None
+        raise
+    finally:
+        if tmpdir is not None:
+            shutil.rmtree(tmpdir, ignore_errors=True)
+    return result, resumed_from
 
 
 # ------------------------------------------------------------------ reading saved runs back

@@ -8,6 +8,7 @@ finite differences in log-parameters.
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxcoag
 from jaxcoag import scenes
@@ -54,6 +55,11 @@ def test_growth_gradients_wrt_disk_and_material_parameters_match_fd():
     assert float(g[0]) > 0  # stronger turbulence, faster growth
 
 
+@pytest.mark.slow  # the default run keeps the same check on the same solve type (nebula_ch4 kernel, fragmentation
+# outcome, implicit Kvaerno5 solve, reverse mode vs central FD in a log outcome parameter, rtol 1e-4) in
+# tests/test_binned_outcome.py::test_gradient_wrt_surface_energy_and_modulus_matches_fd; the engine's
+# Shattering (no erosion) equals RecipeOutcome(VfragShatter) to round-off (test_binned_outcome.py::
+# test_equivalent_to_engine_shattering): ~30 s on 2 cores saved
 def test_fragmentation_gradient_wrt_v_frag_matches_fd():
     f = lambda lp: _log_peak(lp, t_end=3e11, frag=True)[0]
     lp = LP0.at[4].set(jnp.log(30.0))  # low v_frag: fragmentation matters by the end

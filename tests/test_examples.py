@@ -3,6 +3,7 @@ independent references (a finite difference, the true parameters of a synthetic 
 or looped computation, exact mass conservation, the monomer mass, Birnstiel et al. 2012 scaling)."""
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -30,6 +31,13 @@ def _check_02(out):
     lm = out["levenberg_marquardt"]
     np.testing.assert_allclose(lm["alpha"], 1e-4, rtol=5e-3)
     assert abs(lm["alpha"] / out["true_alpha"] - 1.0) == pytest.approx(out["rel_err"], rel=1e-12)
+    # what tests/test_fit.py::test_levenberg_marquardt_recovers (the same quick nebula_box and fit, now
+    # slow) asserts: the optimiser succeeds, the first step cuts the loss 1000x, and the final loss is
+    # the noise floor (1 % noise on sqrt(y): r ~ 0.005 sqrt(y))
+    assert lm["result"] == "successful"
+    assert lm["history"][1] < 1e-3 * lm["history"][0]
+    target = np.asarray(out["target"])
+    assert lm["loss"] < 0.5 * np.sum((0.005 * 3 * np.sqrt(np.maximum(target, 0))) ** 2)
 
 
 def _check_03(out):
@@ -72,8 +80,26 @@ def test_every_example_has_checks():
     assert {p.stem for p in EXAMPLES} == set(CHECKS)
 
 
+def _tree(d):
+    return sorted(os.path.relpath(os.path.join(r, f), d) for r, _, fs in os.walk(d) for f in fs)
+
+
 @pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
-def test_example_quick(path, capsys):
-    out = load_script(path, "_example_").main(["--quick"])
+def test_example_quick(path, capsys, tmp_path, monkeypatch):
+    argv = ["--quick"]
+    if path.stem == "05_cli_run":
+        # the same run also checks where example 05 writes (one run of the example instead of two; the
+        # default output directory is checked in tests/test_output_readable.py): from an empty working
+        # directory with --out, every file goes into --out, nothing into the working directory or examples/
+        cwd = tmp_path / "cwd"
+        cwd.mkdir()
+        monkeypatch.chdir(cwd)
+        before = _tree(ROOT / "examples")
+        argv += ["--out", str(tmp_path / "out")]
+    out = load_script(path, "_example_").main(argv)
     assert capsys.readouterr().out.strip()
     CHECKS[path.stem](out)
+    if path.stem == "05_cli_run":
+        assert _tree(cwd) == []
+        assert _tree(ROOT / "examples") == before
+        assert {"ch4_3au.nc", "ch4_3au.png", "ch4_3au_replot.png"} <= set(_tree(tmp_path / "out"))

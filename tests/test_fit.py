@@ -21,6 +21,9 @@ def _rel(res, truth):
     return {k: abs(res.params[k] / truth[k] - 1.0) for k in truth}
 
 
+@pytest.mark.slow  # the default run fits the same quick nebula_box with Levenberg-Marquardt in
+# tests/test_examples.py::test_example_quick[02_fit_nebula_parameters] (rel. errors < 0.5 %, and the
+# success, first-step and noise-floor assertions below): ~18 s on 2 cores saved
 def test_levenberg_marquardt_recovers(problem):
     m, truth, target, init = problem
     res = fit.fit_least_squares(m, target, init)

@@ -28,6 +28,9 @@ def _check(res):
     assert res["all_ok"]
 
 
+@pytest.mark.slow  # 84 s in the default run (a porous and a compact Monte Carlo run with a two-pass pilot, compile-bound);
+# the default run keeps porous Monte Carlo growth (tests/test_mc_porous.py) and the ch. 2 porosity physics
+# (tests/test_scene_porosity.py, tests/test_porosity.py); this figure's numbers run with -m slow
 def test_fig2_quick(tmp_path):
     res = load_script(FIG, "_paper_fig_ch2_").main(["--quick", "--out", str(tmp_path)])
     _check(res)

@@ -1,0 +1,729 @@
+"""Discrete-element integrator of monomer aggregates: contacts, neighbour search and the leapfrog step.
+
+Monomers are identical spheres (radius r1, mass m_1, moment of inertia I = (2/5) m_1 r1^2 of a
+:class:`~jaxcoag.aggregates.contact.materials.Material`) that interact only through contacts: the JKR normal
+force and the sliding, rolling and twisting springs of Wada et al. (2007) (``interactions.contact_forces``), with
+the inelastic clipping of their eqs. 39-43 (``interactions.clip_inelastic``).
+
+State (:class:`DEMState`, fixed capacity, every field an array so that it checkpoints and vmaps):
+
+* positions ``x``, velocities ``v``, angular velocities ``w`` (N, 3) [cm, cm/s, rad/s] and the force ``F`` [dyn] and
+  torque ``M`` [dyn cm] of the current configuration; planar (2-D) runs keep z = 0 and w parallel to z by the
+  symmetry of the forces (nothing is projected);
+* an owner-row contact table (C-layout of the spec, Part C): particle i owns its contacts with partners j > i in
+  ``partner[i, k]`` (k < K, K = 6 in 2-D and 12 in 3-D, the largest coordination of equal spheres) with the
+  space-frame contact pointers ``n_i``, ``n_j`` (unit vectors fixed in the bodies, Wada et al. 2007 eqs. 28-29,
+  rotated exactly at each drift) and the twisting angle ``phi`` (eq. 24: phi = phi_s n_c);
+* a Verlet neighbour list ``nbr`` (N, K_nb) of partners j > i within 2 r1 + skin (skin = 0.1 r1 by default),
+  rebuilt inside ``lax.cond`` when a monomer has moved more than skin/2 since the last build (under ``jax.vmap``
+  the branch runs when any member needs it and is selected per member, so it stays a branch); the build is a
+  cell list (cell side = the cutoff, a sort of the cell keys and a ``searchsorted`` per neighbour cell:
+  O(N log N), no N^2 step);
+* the energy ledger: potential energies ``U`` = (U_n, U_s, U_r, U_t) at the current configuration and the
+  dissipated energies ``E_dis`` = (E_dis,n, E_dis,s, E_dis,r, E_dis,t) [erg];
+* ``flags`` (bit 1: contact table full, 2: neighbour list or cell full, 4: non-finite state), step counter and
+  contact-event counters.
+
+Leapfrog step (Wada et al. 2007 §4, eqs. 46-47; kick-drift-kick): half kick v += dt F/(2 m_1),
+w += dt M/(2 I); drift x += dt v, pointers rotated by w dt, phi_s += dt (w_i - w_j).n_c; contact breaking at
+delta < -delta_c, creation at delta >= 0 (§2.1), inelastic clipping (eqs. 39-43, the exact potential drop booked
+per channel); forces and torques; second half kick. With forces and torques taken at one configuration the step
+conserves the total momentum and angular momentum sum(m x x v + I w) to round-off (eqs. 18-19 and the
+rolling/twisting pair sums).
+
+Energy ledger of contact events. The paper books the jumps of U_n: E_dis,n += -U_n(delta) at creation and
+U_n(-delta_c) at breaking, plus the spring energies of a broken contact (§2.1). In the leapfrog the kinetic energy
+changes over a step by (1/2)(F_old + F_new).dx (+ a telescoping O(dt^2) term), so a contact that exists at only
+one end of a step also changes E_kin by half its work, (1/2)[F.(dx_i - dx_j) + M_i.dth_i + M_j.dth_j] (an
+O(v dt F_c) amount per event: ~0.016 F_c delta_c for two ice monomers meeting at 2.5 v_0). The ledger books that
+work too (normal channel): at creation E_dis,n += -U_n(delta) - W_new, at breaking the contact's energies at the
+last step (U_n to E_dis,n, U_s, U_r, U_t to their channels) minus the work W_old of its last half kick. So
+E_kin + U + sum E_dis is conserved to the integrator's smooth O(dt^2) error, events included, and E_dis is what
+the dynamics dissipated (the rebound speed of two monomers, sqrt(v^2 - 3.742 v_0^2) for exact events, carries the
+O(v dt) error of detecting events at whole steps; the paper interpolates to the event instant).
+
+Entry points: :func:`init_state` (contacts of every pair with delta >= 0), :func:`step`, :func:`integrate` (a
+fixed-length ``lax.scan`` over chunks of steps, each chunk under ``jax.checkpoint``: reverse-mode differentiable
+with respect to the material leaves, positions and velocities), :func:`integrate_until` (a ``lax.while_loop``
+over chunks with a stop predicate; forward mode only) and :func:`diagnostics`.
+
+Differentiability: forces, torques and the drift are smooth; clipping behaves like ``max``; contact creation and
+breaking, and the neighbour list, are discrete (zero gradient through the event masks).
+
+References: Wada, Tanaka, Suyama, Kimura & Yamamoto (2007, ApJ 661, 320) eqs. 1-47, §2.1 (contact life cycle),
+§4 (integration, dt = 0.014 t_c); Allen & Tildesley (1987) §5.3 (Verlet lists and cell lists).
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..._validate import JaxcoagInputError
+from .interactions import (_dot, _norm, clip_inelastic, contact_forces, contact_geometry, rotate_by,
+                           rotation_coefficients)
+
+__all__ = ["DEMState", "init_state", "step", "integrate", "integrate_until", "diagnostics", "flags_code",
+           "FLAG_CONTACTS", "FLAG_NEIGHBOURS", "FLAG_NONFINITE", "default_capacity", "default_neighbours"]
+
+#: ``DEMState.flags`` bit: a monomer needed more contact slots than the capacity K.
+FLAG_CONTACTS = 1
+#: ``DEMState.flags`` bit: a neighbour-list row or a cell of the cell list was full (pairs may be missed).
+FLAG_NEIGHBOURS = 2
+#: ``DEMState.flags`` bit: a position or velocity became NaN/inf.
+FLAG_NONFINITE = 4
+
+
+def default_capacity(dim: int) -> int:
+    """Contact slots per monomer: the largest coordination of equal spheres, 6 in 2-D and 12 in 3-D."""
+    return 6 if dim == 2 else 12
+
+
+def default_neighbours(dim: int) -> int:
+    """Neighbour-list slots per monomer (partners j > i within 2 r1 + skin): 8 in 2-D and 16 in 3-D (13 equal
+    spheres fit within 2.09 r1 of a sphere in 3-D, 6 within 2.3 r1 in 2-D)."""
+    return 8 if dim == 2 else 16
+
+
+def _cell_occupancy(dim: int) -> int:
+    """Slots per cell of the cell list (cell side 2.1 r1): 6 in 2-D and 12 in 3-D (4 and 8 fit without overlap)."""
+    return 6 if dim == 2 else 12
+
+
+class DEMState(eqx.Module):
+    """State of a monomer DEM run (fixed capacity; every field an array).
+
+    Fields:
+        x, v, w: (N, 3) positions [cm], velocities [cm s^-1], angular velocities [rad s^-1].
+        F, M: (N, 3) total contact force [dyn] and torque [dyn cm] at ``x`` (for the next half kick).
+        partner: (N, K) int32 contact partner j > i of owner i (N = empty slot).
+        active: (N, K) bool, slot holds a contact.
+        n_i, n_j: (N, K, 3) contact pointers of the owner and the partner (unit vectors, space frame).
+        phi: (N, K) twisting angle phi_s [rad] (Wada et al. 2007 eq. 24).
+        nbr: (N, K_nb) int32 Verlet neighbours j > i of i (N = empty).
+        x_ref: (N, 3) positions at the last neighbour-list build [cm].
+        U: (4,) potential energies (U_n, U_s, U_r, U_t) of all contacts at ``x`` [erg].
+        Uc: (N, K, 4) energies (U_n, U_s, U_r, U_t) of each contact at ``x`` [erg] (booked as dissipated when
+            the contact breaks in the next step).
+        Fc, Mc1, Mc2: (N, K, 3) force on the owner [dyn] and torques on owner and partner [dyn cm] of each
+            contact at ``x`` (for the work of a contact that breaks in the next step).
+        E_dis: (4,) dissipated energies (normal, sliding, rolling, twisting) since the start [erg].
+        axes: (dim,) bool, its length is the dimension of the run (2: planar, 3) and so a static shape.
+        step: int64, steps taken since the start; t = t0 + step dt.
+        t0: float64, time of the start [s].
+        flags: int32, ``FLAG_CONTACTS | FLAG_NEIGHBOURS | FLAG_NONFINITE`` bits.
+        n_events: int64, contact creations + breakings since the start.
+        first_event: int64, step of the first creation or breaking (-1: none yet).
+        last_event: int64, step of the latest creation or breaking (-1: none yet).
+        n_builds: int64, neighbour-list builds since the start.
+    """
+
+    x: jax.Array
+    v: jax.Array
+    w: jax.Array
+    F: jax.Array
+    M: jax.Array
+    partner: jax.Array
+    active: jax.Array
+    n_i: jax.Array
+    n_j: jax.Array
+    phi: jax.Array
+    nbr: jax.Array
+    x_ref: jax.Array
+    U: jax.Array
+    Uc: jax.Array
+    Fc: jax.Array
+    Mc1: jax.Array
+    Mc2: jax.Array
+    E_dis: jax.Array
+    axes: jax.Array
+    step: jax.Array
+    t0: jax.Array
+    flags: jax.Array
+    n_events: jax.Array
+    first_event: jax.Array
+    last_event: jax.Array
+    n_builds: jax.Array
+
+    @property
+    def dim(self) -> int:
+        """2 (planar) or 3 (static: the length of ``axes``)."""
+        return int(self.axes.shape[-1])
+
+
+class _Cfg(NamedTuple):
+    """Static options of the step."""
+
+    dim: int
+    inelastic: bool
+    freeze: bool
+
+
+
+# ------------------------------------------------------------------------------------------------- batching
+@jax.custom_batching.custom_vmap
+def _any_member(pred):
+    """``pred`` (bool scalar), reduced with ``any`` over every ``jax.vmap`` batch axis: the predicate of a
+    ``lax.cond`` that stays a real branch (skipped work) under ``vmap``, where a batched predicate turns the cond
+    into a select that evaluates both branches for every member. The branch taken then selects per member."""
+    return pred
+
+
+@_any_member.def_vmap
+def _any_member_vmap(axis_size, in_batched, pred):
+    (batched,) = in_batched
+    return _any_member(jnp.any(pred, axis=0) if batched else pred), False
+
+
+@jax.custom_batching.custom_vmap
+def _max_member(index):
+    """``index`` (int scalar), reduced with ``max`` over every ``jax.vmap`` batch axis (the branch index of a
+    ``lax.switch`` whose higher branches also serve the lower cases, kept unbatched as in :func:`_any_member`)."""
+    return index
+
+
+@_max_member.def_vmap
+def _max_member_vmap(axis_size, in_batched, index):
+    (batched,) = in_batched
+    return _max_member(jnp.max(index, axis=0) if batched else index), False
+
+
+def _cond_members(pred, true_fn, false_fn, operand):
+    """``lax.cond(pred, true_fn, false_fn, operand)`` with the same result per member under ``jax.vmap``, but
+    ``true_fn`` runs only when some member's ``pred`` is True (then selected per member against ``false_fn``)."""
+
+    def either(op):
+        a, b = true_fn(op), false_fn(op)
+        return jax.tree_util.tree_map(lambda u, w: jnp.where(pred, u, w), a, b)
+
+    return jax.lax.cond(_any_member(pred), either, false_fn, operand)
+
+
+# ------------------------------------------------------------------------------------------------- geometry
+def _gather(a, idx):
+    """Rows ``a[idx]`` with the empty sentinel (idx = N) clamped to a valid row (masked by the caller)."""
+    return a[jnp.minimum(idx, a.shape[0] - 1)]
+
+
+def _safe_pairs(x, partner, active, r1):
+    """Positions of the pair ends (N, K, 3): the partner's, or a dummy at distance 2 r1 along x for empty slots
+    (finite contact geometry there, so that NaN never enters a masked lane or its gradient)."""
+    xi = jnp.broadcast_to(x[:, None, :], partner.shape + (3,))
+    xj = _gather(x, partner)
+    dummy = xi - 2.0 * r1 * jnp.array([[[1.0, 0.0, 0.0]]])
+    return xi, jnp.where(active[..., None], xj, dummy)
+
+
+def _unit(d):
+    """d/|d| and |d| with a safe norm (|d| > 0 in every lane that is used)."""
+    r2 = _dot(d, d)
+    ok = r2 > 0
+    r = jnp.sqrt(jnp.where(ok, r2, 1.0))
+    return jnp.where(ok[..., None], d / r[..., None], 0.0), jnp.where(ok, r, 0.0)
+
+
+def _safe_pointers(n_i, n_j, phi, active):
+    """Pointers of empty slots set to the at-rest values of the dummy geometry (n_i = -e_x, n_j = +e_x)."""
+    ex = jnp.broadcast_to(jnp.array([1.0, 0.0, 0.0]), n_i.shape)
+    a = active[..., None]
+    return jnp.where(a, n_i, -ex), jnp.where(a, n_j, ex), jnp.where(active, phi, 0.0)
+
+
+def _contact_buffer(n_slots: int) -> int:
+    """Static number of contact slots that the compacted force evaluation handles (1/3 of the table, >= 32; a
+    monomer aggregate has about one contact per monomer, K = 6 or 12 slots, so the full table is the fallback)."""
+    return min(n_slots, max(32, n_slots // 3))
+
+
+def _evaluate(x, partner, active, n_i, n_j, phi, mat):
+    """Force [dyn] and torque [dyn cm] on every monomer, the four potential energies (U_n, U_s, U_r, U_t) [erg]
+    summed over the contacts, and per contact slot (zero where empty): the energies (N, K, 4) [erg], the force on
+    the owner (N, K, 3) [dyn] and the torques on owner and partner (N, K, 3) [dyn cm]. The occupied slots are
+    gathered into a buffer of :func:`_contact_buffer` slots when they fit (else the whole table is evaluated)."""
+    N, K = partner.shape
+    L = N * K
+    nbuf = _contact_buffer(L)
+    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    ni, nj, ph = _safe_pointers(n_i, n_j, phi, active)
+
+    def per_slot(cf):
+        return cf.F1, cf.M1, cf.M2, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1)
+
+    def full(_):
+        return per_slot(contact_forces(xi, xj, ni, nj, ph, mat))
+
+    def compact(_):
+        # only the occupied slots (typically ~1/K of the table) are evaluated, then scattered back
+        idx = jnp.nonzero(active.reshape(L), size=nbuf, fill_value=L)[0]
+        take = lambda a: a.reshape((L,) + a.shape[2:])[jnp.minimum(idx, L - 1)]  # noqa: E731
+        out = per_slot(contact_forces(take(xi), take(xj), take(ni), take(nj), take(ph), mat))
+        return tuple(jnp.zeros((L,) + o.shape[1:]).at[idx].set(o, mode="drop").reshape((N, K) + o.shape[1:])
+                     for o in out)
+
+    F1, M1, M2, Uc = jax.lax.switch(_max_member((jnp.sum(active) > nbuf).astype(jnp.int32)), (compact, full), None)
+    a = active[..., None]
+    F1 = jnp.where(a, F1, 0.0)
+    M1 = jnp.where(a, M1, 0.0)
+    M2 = jnp.where(a, M2, 0.0)
+    ids = jnp.where(active, partner, N).reshape(-1)
+    F = jnp.sum(F1, axis=1) + jax.ops.segment_sum(-F1.reshape(-1, 3), ids, num_segments=N + 1)[:N]
+    M = jnp.sum(M1, axis=1) + jax.ops.segment_sum(M2.reshape(-1, 3), ids, num_segments=N + 1)[:N]
+    Uc = jnp.where(a, Uc, 0.0)
+    return F, M, jnp.sum(Uc, axis=(0, 1)), Uc, F1, M1, M2
+
+
+def _work(Fc, Mc1, Mc2, partner, dx, dth):
+    """Half the work of each contact's force and torques over a step, (1/2) [F.(dx_i - dx_j) + M_1.dth_i +
+    M_2.dth_j] [erg] (N, K): the leapfrog's half kick with a contact that exists at only one end of the step."""
+    N = dx.shape[0]
+    dxi = jnp.broadcast_to(dx[:, None, :], Fc.shape)
+    dti = jnp.broadcast_to(dth[:, None, :], Fc.shape)
+    return 0.5 * (_dot(Fc, dxi - _gather(dx, partner)) + _dot(Mc1, dti) + _dot(Mc2, _gather(dth, partner)))
+
+
+# ------------------------------------------------------------------------------------------------- neighbours
+def _offsets(dim):
+    rng = (-1, 0, 1)
+    offs = [o + (0,) for o in itertools.product(rng, rng)] if dim == 2 else list(itertools.product(rng, rng, rng))
+    return np.asarray(offs, np.int64)
+
+
+def _build_neighbours(x, cutoff, n_nb, dim):
+    """Verlet list (N, n_nb) of partners j > i with |x_i - x_j| < cutoff, by a cell list of side ``cutoff``.
+
+    The monomers are sorted by the integer key of their cell; for each of the 3^dim neighbouring cells the range
+    of its members is found with ``searchsorted`` and up to ``occ`` of them are tested. Returns (nbr, overflow):
+    overflow is True when a cell held more than ``occ`` monomers or a row more than ``n_nb`` neighbours (then
+    pairs may be missing: the run's status becomes ``capacity_exceeded``).
+    """
+    N = x.shape[0]
+    occ = _cell_occupancy(dim)
+    lo = jnp.min(x, axis=0)
+    c = jnp.floor((x - lo[None, :]) / cutoff).astype(jnp.int64)
+    nc = jnp.max(c, axis=0) + 1
+    key_of = lambda cc: (cc[..., 0] * nc[1] + cc[..., 1]) * nc[2] + cc[..., 2]  # noqa: E731
+    order = jnp.argsort(key_of(c))
+    skey = key_of(c)[order]
+    offs = jnp.asarray(_offsets(dim))
+    S = offs.shape[0]
+    cc = c[:, None, :] + offs[None, :, :]  # (N, S, 3) the neighbouring cells
+    inside = jnp.all((cc >= 0) & (cc < nc[None, None, :]), axis=-1)
+    k = key_of(cc).reshape(-1)
+    start = jnp.searchsorted(skey, k, side="left").reshape(N, S)
+    stop = jnp.searchsorted(skey, k, side="right").reshape(N, S)
+    overflow = jnp.any(inside & (stop - start > occ))
+    pos = start[:, :, None] + jnp.arange(occ)[None, None, :]
+    j = order[jnp.minimum(pos, N - 1)]
+    idx_i = jnp.arange(N)
+    ok = inside[:, :, None] & (pos < stop[:, :, None]) & (j > idx_i[:, None, None])
+    cand = j.reshape(N, S * occ)
+    ok = ok.reshape(N, S * occ)
+    d = x[:, None, :] - x[cand]
+    ok = ok & (_dot(d, d) < cutoff**2)
+    rank = jnp.cumsum(ok, axis=1) - 1
+    overflow = overflow | jnp.any(jnp.sum(ok, axis=1) > n_nb)
+    rank = jnp.where(ok, rank, n_nb)
+    rows = jnp.broadcast_to(idx_i[:, None], cand.shape)
+    nbr = jnp.full((N, n_nb), N, jnp.int32).at[rows, rank].set(cand.astype(jnp.int32), mode="drop")
+    return nbr, overflow
+
+
+# ------------------------------------------------------------------------------------------------- contacts
+def _create(x, partner, active, n_i, n_j, phi, nbr, mat):
+    """New contacts for the neighbour pairs with delta >= 0 not yet in contact (Wada et al. 2007 §2.1).
+
+    Slots are assigned within each owner row (ranks of the candidates matched to ranks of the free slots, so no
+    two rows write the same place). Pointers n_i = -n_c, n_j = +n_c (n_c = (x_i - x_j)/|x_i - x_j|), phi = 0.
+    Returns the updated table, the mask of new contacts (N, K) (the caller books E_dis,n += -U_n(delta) of each,
+    the jump of U_n from 0 to its JKR value, from the force evaluation at the same positions) and an overflow
+    flag (more candidates than free slots).
+    """
+    N, K = partner.shape
+    valid = nbr < N
+    xn = _gather(x, nbr)
+    nc, dist = _unit(jnp.broadcast_to(x[:, None, :], xn.shape) - xn)
+    delta = 2.0 * mat.r1 - dist
+    already = jnp.any((partner[:, None, :] == nbr[:, :, None]) & active[:, None, :], axis=-1)
+    cand = valid & (delta >= 0) & ~already
+    free = ~active
+    crank = jnp.cumsum(cand, axis=1) - 1
+    frank = jnp.cumsum(free, axis=1) - 1
+    overflow = jnp.any(jnp.sum(cand, axis=1) > jnp.sum(free, axis=1))
+    match = free[:, :, None] & cand[:, None, :] & (frank[:, :, None] == crank[:, None, :])  # (N, K, K_nb)
+    new = jnp.any(match, axis=-1)
+    mf = match.astype(x.dtype)
+    new_partner = jnp.sum(jnp.where(match, nbr[:, None, :], 0), axis=-1).astype(partner.dtype)
+    new_nc = jnp.sum(mf[..., None] * nc[:, None, :, :], axis=2)
+    a = new[..., None]
+    partner = jnp.where(new, new_partner, partner)
+    n_i = jnp.where(a, -new_nc, n_i)
+    n_j = jnp.where(a, new_nc, n_j)
+    phi = jnp.where(new, 0.0, phi)
+    return partner, active | new, n_i, n_j, phi, new, overflow
+
+
+def _break(x, partner, active, mat):
+    """Break the contacts with delta < -delta_c (Wada et al. 2007 §2.1). Returns (partner, active, broken mask)."""
+    N = x.shape[0]
+    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    _, dist = _unit(xi - xj)
+    broken = active & (2.0 * mat.r1 - dist < -mat.delta_c)
+    active = active & ~broken
+    return jnp.where(active, partner, N), active, broken
+
+
+
+def _clip_buffer(n_slots: int) -> int:
+    """Static number of contact slots that the compacted inelastic clipping handles (1/16 of the table, >= 32)."""
+    return min(n_slots, max(32, n_slots // 16))
+
+
+def _clip(x, partner, active, n_i, n_j, phi, mat):
+    """Inelastic clipping (Wada et al. 2007 eqs. 39-43, ``interactions.clip_inelastic``) of the contact table.
+
+    Only the contacts past a critical displacement (|zeta| > zeta_crit, |xi| > xi_crit or |phi_s| > phi_crit, the
+    test of ``clip_inelastic``) change, so they are gathered into a buffer of :func:`_clip_buffer` slots, clipped
+    there and scattered back; nothing runs when none is over its limit, and the whole table is clipped when more
+    than the buffer are (the branch is chosen by the largest count of a ``vmap`` batch). The other slots are
+    returned unchanged, as ``clip_inelastic`` itself returns them. Returns (n_i, n_j, phi, dE) with dE = (dE_s,
+    dE_r, dE_t) [erg] summed over the contacts.
+    """
+    N, K = partner.shape
+    L = N * K
+    nbuf = _clip_buffer(L)
+    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    ni0, nj0, ph0 = _safe_pointers(n_i, n_j, phi, active)
+    _, _, _, _, zeta, xiv = contact_geometry(xi, xj, ni0, nj0, mat)
+    over = active & ((_norm(zeta) > mat.zeta_crit) | (_norm(xiv) > mat.xi_crit) | (jnp.abs(ph0) > mat.phi_crit))
+    cnt = jnp.sum(over)
+    branch = jnp.where(cnt == 0, 0, jnp.where(cnt <= nbuf, 1, 2)).astype(jnp.int32)
+
+    def none(_):
+        return n_i, n_j, phi, jnp.zeros(3)
+
+    def compact(_):
+        idx = jnp.nonzero(over.reshape(L), size=nbuf, fill_value=L)[0]
+        take = lambda a: a.reshape((L,) + a.shape[2:])[jnp.minimum(idx, L - 1)]  # noqa: E731
+        ni1, nj1, ph1, dEs, dEr, dEt = clip_inelastic(take(xi), take(xj), take(ni0), take(nj0), take(ph0), mat)
+        put = lambda a, b: a.reshape((L,) + a.shape[2:]).at[idx].set(b, mode="drop").reshape(a.shape)  # noqa: E731
+        ok = idx < L
+        dE = jnp.stack([jnp.sum(jnp.where(ok, e, 0.0)) for e in (dEs, dEr, dEt)])
+        return put(n_i, ni1), put(n_j, nj1), put(phi, ph1), dE
+
+    def full(_):
+        ni1, nj1, ph1, dEs, dEr, dEt = clip_inelastic(xi, xj, ni0, nj0, ph0, mat)
+        a = active[..., None]
+        dE = jnp.stack([jnp.sum(jnp.where(active, e, 0.0)) for e in (dEs, dEr, dEt)])
+        return jnp.where(a, ni1, n_i), jnp.where(a, nj1, n_j), jnp.where(active, ph1, phi), dE
+
+    return jax.lax.switch(_max_member(branch), (none, compact, full), None)
+
+
+# ------------------------------------------------------------------------------------------------- state
+def init_state(x, v, w, mat, *, dim=3, capacity=None, neighbours=None, skin=0.1, t0=0.0):
+    """Initial DEM state: every pair with compression delta = 2 r1 - |x_i - x_j| >= 0 becomes a contact at rest
+    (pointers along the line of centres, no sliding, rolling or twisting displacement, phi = 0).
+
+    Arguments:
+        x, v, w: (N, 3) positions [cm], velocities [cm s^-1], angular velocities [rad s^-1] (planar runs: z = 0,
+            v_z = 0, w along z).
+        mat: :class:`~jaxcoag.aggregates.contact.materials.Material`.
+        dim: 2 (planar) or 3 (static; sets the neighbour-cell stencil).
+        capacity: contact slots per monomer (default 6 in 2-D, 12 in 3-D).
+        neighbours: neighbour-list slots per monomer (default 8 in 2-D, 16 in 3-D).
+        skin: Verlet skin in units of r1 (cutoff 2 r1 + skin r1).
+        t0: start time [s].
+
+    Returns:
+        :class:`DEMState` (``flags`` has ``FLAG_CONTACTS`` / ``FLAG_NEIGHBOURS`` set if the capacities cannot hold
+        the initial contacts).
+
+    References: Wada et al. (2007) §2.1 (a contact forms at delta >= 0), §4.
+    """
+    if dim not in (2, 3):
+        raise JaxcoagInputError(f"dim must be 2 or 3; got {dim!r}.")
+    K = int(capacity or default_capacity(dim))
+    Kn = int(neighbours or default_neighbours(dim))
+    x = jnp.asarray(x, jnp.float64)
+    N = x.shape[0]
+    f = lambda a: jnp.broadcast_to(jnp.asarray(a, jnp.float64), (N, 3))  # noqa: E731
+    return _init_impl(x, f(v), f(w), mat, jnp.asarray(skin, jnp.float64), jnp.asarray(t0, jnp.float64),
+                      dim=dim, K=K, Kn=Kn)
+
+
+@functools.partial(jax.jit, static_argnames=("dim", "K", "Kn"))
+def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
+    N = x.shape[0]
+    cutoff = (2.0 + skin) * mat.r1
+    nbr, ovf_nb = _build_neighbours(x, cutoff, Kn, dim)
+    partner = jnp.full((N, K), N, jnp.int32)
+    active = jnp.zeros((N, K), bool)
+    z3 = jnp.zeros((N, K, 3))
+    partner, active, n_i, n_j, phi, _, ovf_c = _create(x, partner, active, z3, z3, jnp.zeros((N, K)), nbr, mat)
+    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, partner, active, n_i, n_j, phi, mat)
+    flags = jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
+    i64 = lambda n: jnp.asarray(n, jnp.int64)  # noqa: E731
+    return DEMState(x=x, v=v, w=w, F=F, M=M, partner=partner, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
+                    x_ref=x, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=jnp.zeros(4), axes=jnp.ones((dim,), bool),
+                    step=i64(0), t0=t0,
+                    flags=flags.astype(jnp.int32), n_events=i64(0), first_event=i64(-1), last_event=i64(-1),
+                    n_builds=i64(1))
+
+
+# ------------------------------------------------------------------------------------------------- step
+def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
+    """One kick-drift-kick step (module docstring)."""
+    N, K = st.partner.shape
+    m1, I1 = mat.m1, mat.I1
+    v = st.v + (0.5 * dt / m1) * st.F
+    w = st.w + (0.5 * dt / I1) * st.M
+    x = st.x + dt * v
+    partner, active = st.partner, st.active
+    wi = jnp.broadcast_to(w[:, None, :], st.n_i.shape)
+    wj = _gather(w, partner)
+    # pointers rotate with their monomer (Rodrigues, ``interactions.rotate``): coefficients once per monomer
+    th = w * dt
+    s_rot, c_rot = rotation_coefficients(th)
+    n_i = rotate_by(st.n_i, jnp.broadcast_to(th[:, None, :], st.n_i.shape),
+                    jnp.broadcast_to(s_rot[:, None], partner.shape), jnp.broadcast_to(c_rot[:, None], partner.shape))
+    n_j = rotate_by(st.n_j, _gather(th, partner), _gather(s_rot, partner), _gather(c_rot, partner))
+    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    nc, _ = _unit(xi - xj)
+    phi = jnp.where(active, st.phi + dt * _dot(wi - wj, nc), 0.0)
+    E_dis = st.E_dis
+    flags = st.flags
+    n_ev = jnp.zeros((), jnp.int64)
+    nbr, x_ref, n_builds = st.nbr, st.x_ref, st.n_builds
+    if not cfg.freeze:
+        partner, active, broken = _break(x, partner, active, mat)
+        # energy ledger of a breaking (module docstring): the stored energies of the contact leave U; the
+        # work of its last half kick, done in this step's first half kick, is part of the kinetic energy
+        wb = jnp.where(broken, _work(st.Fc, st.Mc1, st.Mc2, st.partner, dt * v, dt * w), 0.0)
+        E_dis = E_dis + jnp.sum(jnp.where(broken[..., None], st.Uc, 0.0), axis=(0, 1)) - jnp.zeros(4).at[0].set(
+            jnp.sum(wb))
+        cutoff = (2.0 + skin) * mat.r1
+        disp2 = jnp.max(_dot(x - st.x_ref, x - st.x_ref))
+        rebuild = disp2 > (0.5 * skin * mat.r1) ** 2
+
+        def build(_):
+            nb, ovf = _build_neighbours(x, cutoff, nbr.shape[1], cfg.dim)
+            return nb, x, ovf
+
+        def keep(_):
+            return nbr, x_ref, jnp.zeros((), bool)
+
+        nbr, x_ref, ovf_nb = _cond_members(rebuild, build, keep, None)
+        n_builds = n_builds + rebuild.astype(jnp.int64)
+        # creation is rare: the slot assignment runs only when some neighbour pair has delta >= 0 and no contact
+        # (a touching pair, delta >= 0, is in the Verlet list; it is new unless it is an active contact)
+        xn = _gather(x, nbr)
+        _, dn = _unit(jnp.broadcast_to(x[:, None, :], xn.shape) - xn)
+        n_touch = jnp.sum((nbr < x.shape[0]) & (2.0 * mat.r1 - dn >= 0))
+        xi, xj = _safe_pairs(x, partner, active, mat.r1)
+        _, dc = _unit(xi - xj)
+        n_touch_old = jnp.sum(active & (2.0 * mat.r1 - dc >= 0))
+
+        def create(args):
+            return _create(x, *args, nbr, mat)
+
+        def no_create(args):
+            p, a, ni_, nj_, ph = args
+            return p, a, ni_, nj_, ph, jnp.zeros_like(a), jnp.zeros((), bool)
+
+        maybe_new = n_touch > n_touch_old
+        partner, active, n_i, n_j, phi, new, ovf_c = _cond_members(maybe_new, create, no_create,
+                                                                   (partner, active, n_i, n_j, phi))
+        flags = flags | jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
+        n_ev = (jnp.sum(broken) + jnp.sum(new)).astype(jnp.int64)
+    if cfg.inelastic:
+        n_i, n_j, phi, dE = _clip(x, partner, active, n_i, n_j, phi, mat)
+        E_dis = E_dis + jnp.concatenate([jnp.zeros(1), dE])
+    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, partner, active, n_i, n_j, phi, mat)
+    if not cfg.freeze:
+        # creation: U_n jumps from 0 to U_n(delta), and the second half kick does the new contact's work
+        wc = _work(Fc, Mc1, Mc2, partner, dt * v, dt * w)
+        E_dis = E_dis.at[0].add(-jnp.sum(jnp.where(new, Uc[..., 0] + wc, 0.0)))
+    v = v + (0.5 * dt / m1) * F
+    w = w + (0.5 * dt / I1) * M
+    stp = st.step + 1
+    event = n_ev > 0
+    return DEMState(x=x, v=v, w=w, F=F, M=M, partner=partner, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
+                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, axes=st.axes, step=stp, t0=st.t0,
+                    flags=flags, n_events=st.n_events + n_ev,
+                    first_event=jnp.where(event & (st.first_event < 0), stp, st.first_event),
+                    last_event=jnp.where(event, stp, st.last_event), n_builds=n_builds)
+
+
+def _check_finite(st: DEMState) -> DEMState:
+    bad = ~(jnp.all(jnp.isfinite(st.x)) & jnp.all(jnp.isfinite(st.v)) & jnp.all(jnp.isfinite(st.w)))
+    return eqx.tree_at(lambda s: s.flags, st, st.flags | jnp.where(bad, FLAG_NONFINITE, 0).astype(jnp.int32))
+
+
+def step(state: DEMState, mat, dt, *, inelastic=True, freeze_contacts=False, skin=0.1) -> DEMState:
+    """One leapfrog step of length ``dt`` [s] (module docstring; Wada et al. 2007 §4, eqs. 46-47).
+
+    Arguments:
+        state: :class:`DEMState`.
+        mat: the material.
+        dt: time step [s] (Wada et al. use 0.014 t_c).
+        inelastic: static; apply the inelastic clipping of sliding, rolling and twisting (eqs. 39-43).
+        freeze_contacts: static; no contact creation or breaking (the dissipationless test of the spec).
+        skin: Verlet skin in units of r1 (must match the one of :func:`init_state`).
+
+    Returns: the state after the step.
+    """
+    cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts))
+    return _step(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), cfg)
+
+
+def diagnostics(state: DEMState, mat) -> dict:
+    """Energies, momenta and counters of a state (all at the synchronous time of the leapfrog).
+
+    Returns a dict of arrays: ``E_kin`` (translational + rotational kinetic energy [erg]), ``E_kin_rot`` [erg],
+    ``U`` (U_n + U_s + U_r + U_t [erg]), ``U_n``, ``U_s``, ``U_r``, ``U_t``, ``E_dis_n``, ``E_dis_s``,
+    ``E_dis_r``, ``E_dis_t`` [erg], ``E_total`` (E_kin + U + sum E_dis [erg]), ``P`` (3,) total momentum
+    [g cm s^-1], ``L`` (3,) total angular momentum sum(m x x v + I w) about the origin [g cm^2 s^-1],
+    ``n_contacts`` (int), ``flags`` (int32), ``step`` (int64).
+
+    References: Wada et al. (2007) §4 and Fig. 6 (energy budget).
+    """
+    m1, I1 = mat.m1, mat.I1
+    e_tr = 0.5 * m1 * jnp.sum(state.v**2)
+    e_rot = 0.5 * I1 * jnp.sum(state.w**2)
+    U = state.U
+    out = dict(E_kin=e_tr + e_rot, E_kin_rot=e_rot, U=jnp.sum(U), U_n=U[0], U_s=U[1], U_r=U[2], U_t=U[3],
+               E_dis_n=state.E_dis[0], E_dis_s=state.E_dis[1], E_dis_r=state.E_dis[2], E_dis_t=state.E_dis[3],
+               E_total=e_tr + e_rot + jnp.sum(U) + jnp.sum(state.E_dis),
+               P=m1 * jnp.sum(state.v, axis=0),
+               L=m1 * jnp.sum(jnp.cross(state.x, state.v), axis=0) + I1 * jnp.sum(state.w, axis=0),
+               n_contacts=jnp.sum(state.active).astype(jnp.int64), flags=state.flags, step=state.step)
+    return out
+
+
+def flags_code(flags):
+    """The :data:`jaxcoag.RESULT_NAMES` code (int32, elementwise, traceable) of DEM ``flags`` words:
+    ``capacity_exceeded`` (contact or neighbour capacity; pairs may have been missed), ``nonfinite``, else
+    ``successful`` (0)."""
+    from ..._status import RESULT_NAMES
+
+    flags = jnp.asarray(flags)
+    cap = (flags & (FLAG_CONTACTS | FLAG_NEIGHBOURS)) != 0
+    nf = (flags & FLAG_NONFINITE) != 0
+    code = jnp.where(nf, RESULT_NAMES.index("nonfinite"), 0)
+    return jnp.where(cap, RESULT_NAMES.index("capacity_exceeded"), code).astype(jnp.int32)
+
+
+# ------------------------------------------------------------------------------------------------- loops
+def _n_steps_loop(st, mat, dt, skin, cfg, n):
+    """``n`` (traced int) steps in a while loop."""
+    return jax.lax.fori_loop(0, n, lambda _, s: _step(s, mat, dt, skin, cfg), st)
+
+
+def integrate(state: DEMState, mat, n_steps: int, *, dt, inelastic=True, freeze_contacts=False, skin=0.1,
+              chunk=None):
+    """``n_steps`` leapfrog steps as a fixed-length ``lax.scan`` over chunks (reverse-mode differentiable).
+
+    Arguments:
+        state: :class:`DEMState`. mat: the material. n_steps: static number of steps.
+        dt: time step [s]. inelastic, freeze_contacts, skin: as for :func:`step`.
+        chunk: steps per chunk (static; default min(n_steps, 1000)); must divide n_steps. Each chunk is a
+            ``jax.checkpoint``-ed inner scan, so reverse mode stores one state per chunk.
+
+    Returns:
+        (state, record): record is :func:`diagnostics` after every chunk (leading axis n_steps/chunk).
+
+    References: Wada et al. (2007) §4; spec Part C (chunked scan).
+    """
+    n_steps = int(n_steps)
+    chunk = int(chunk or min(n_steps, 1000))
+    if n_steps < 1 or chunk < 1 or n_steps % chunk:
+        raise JaxcoagInputError(f"integrate: n_steps ({n_steps}) must be a positive multiple of chunk ({chunk}).")
+    cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts))
+    return _integrate_jit(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), cfg,
+                          n_steps // chunk, chunk)
+
+
+@functools.partial(jax.jit, static_argnums=(4, 5, 6))
+def _integrate_jit(state, mat, dt, skin, cfg, n_chunks, chunk):
+    @jax.checkpoint
+    def one_chunk(st):
+        st, _ = jax.lax.scan(lambda s, _: (_step(s, mat, dt, skin, cfg), None), st, None, length=chunk)
+        return _check_finite(st)
+
+    def body(st, _):
+        st = one_chunk(st)
+        return st, diagnostics(st, mat)
+
+    return jax.lax.scan(body, state, None, length=n_chunks)
+
+
+def integrate_until(state: DEMState, mat, stop, *, dt, max_chunks: int, chunk: int = 1000, inelastic=True,
+                    freeze_contacts=False, skin=0.1):
+    """Chunks of ``chunk`` steps in a ``lax.while_loop`` until ``stop(state)`` is True (checked after each chunk),
+    ``max_chunks`` chunks were taken, or a flag (capacity, non-finite) is raised. Forward mode only.
+
+    Arguments:
+        state, mat: as for :func:`integrate`. stop: jittable function of a :class:`DEMState` -> bool scalar.
+        dt: time step [s]. max_chunks: static length of the record. chunk: static steps per chunk.
+        inelastic, freeze_contacts, skin: as for :func:`step`.
+
+    Returns:
+        (state, record, n_done): record holds :func:`diagnostics` after each chunk (leading axis max_chunks;
+        entries at and after n_done repeat the final state's), n_done the chunks taken.
+    """
+    cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts))
+    return _until_jit(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), stop, cfg,
+                      int(max_chunks), int(chunk))
+
+
+@functools.partial(jax.jit, static_argnums=(4, 5, 6, 7))
+def _until_jit(state, mat, dt, skin, stop, cfg, max_chunks, chunk):
+    rec0 = jax.tree_util.tree_map(lambda a: jnp.zeros((max_chunks,) + jnp.shape(a), jnp.asarray(a).dtype),
+                                  diagnostics(state, mat))
+
+    def cond(c):
+        st, _, k = c
+        return (k < max_chunks) & ~stop(st) & (st.flags == 0)
+
+    def body(c):
+        st, rec, k = c
+        st = _check_finite(_n_steps_loop(st, mat, dt, skin, cfg, chunk))
+        d = diagnostics(st, mat)
+        rec = jax.tree_util.tree_map(lambda r, a: r.at[k].set(a), rec, d)
+        return st, rec, k + 1
+
+    st, rec, k = jax.lax.while_loop(cond, body, (state, rec0, jnp.zeros((), jnp.int64)))
+    last = diagnostics(st, mat)
+    idx = jnp.arange(max_chunks)
+    rec = jax.tree_util.tree_map(
+        lambda r, a: jnp.where((idx >= k).reshape((-1,) + (1,) * jnp.ndim(a)), a, r), rec, last)
+    return st, rec, k
+
+
+def advance_to(state: DEMState, mat, target_steps, *, dt, inelastic=True, freeze_contacts=False, skin=0.1):
+    """Advance to each absolute step count of ``target_steps`` (1-D int64, non-decreasing) and record
+    :func:`diagnostics` there (``lax.scan`` over the targets, a ``while_loop`` of steps within). Forward mode only.
+
+    Returns: (state, record with leading axis len(target_steps)).
+    """
+    cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts))
+    return _advance_jit(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64),
+                        jnp.asarray(target_steps, jnp.int64), cfg)
+
+
+@functools.partial(jax.jit, static_argnums=(5,))
+def _advance_jit(state, mat, dt, skin, targets, cfg):
+    def body(st, target):
+        n = jnp.maximum(target - st.step, 0)
+        # a raised flag stops the run: later outputs repeat the flagged state
+        n = jnp.where(st.flags == 0, n, 0)
+        st = _check_finite(_n_steps_loop(st, mat, dt, skin, cfg, n))
+        return st, diagnostics(st, mat)
+
+    return jax.lax.scan(body, state, targets)

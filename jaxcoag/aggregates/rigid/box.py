@@ -1,0 +1,1063 @@
+"""Periodic-box simulator of colliding spheres and rigid fractal aggregates (Richardson 1995, §3, Table I).
+
+A box of side ``L`` (periodic in x, y, z; free space: straight-line motion between collisions) holds
+``n0`` equal spheres. :func:`box_model` builds the initial condition of one of the five test models of
+R95 Table I, :class:`RigidBox` is the engine and :func:`run` runs it (through :func:`jaxcoag.evolve`, so
+``checkpoint=`` / ``progress=`` / resume work as for every engine)::
+
+    box = rigid.box_model("i", n0=1000, v0=13.0, key=jax.random.key(1))
+    res = rigid.run(box, jnp.linspace(0.4, 8.2, 20))
+    res.n_aggregates, res.n_collisions, res.max_mass, res.mass_spectrum(), res.fractal_dimension()
+
+Models (R95 Table I, §3): (i) spheres merge into a sphere of fixed radius ``r0`` at the mass-weighted
+centre, moving at the constant speed ``v0`` along the summed momentum (a constant coagulation kernel
+``α = π(2R)² (4/3) v0 / L³``, eqs. 29-31); (ii) spheres merge into a sphere of radius
+``r0 (m/m0)^(1/3)`` with the momentum-conserving velocity; (iii) aggregates stick rigidly at the contact
+point (R8-R12); (iv), (v) aggregates stick when the impact energy ``E_imp = ½ μ |V_2 − V_1|²`` is below
+``E_thr`` (the initial mean kinetic energy per particle) and bounce otherwise, with the normal coefficient
+of restitution of Bridges et al. (1984) (R13-R28). Model (v) has 9000 spheres of radius 0.033.
+
+Numerical scheme (one synchronized global time; all arrays have the fixed capacity ``n0``):
+
+* Models (i), (ii): exact event-driven dynamics. Every sphere keeps the time and partner of its earliest
+  predicted impact over its neighbour list (exact quadratic time of impact, R1's
+  :func:`~jaxcoag.aggregates.rigid.body.sphere_toi`); the loop jumps to the earliest of (next impact,
+  next neighbour-list rebuild, next output time), so a collision costs O(K²) (the rows of the two
+  colliders and of their neighbours) plus O(n0) for the global move, independent of the pair count.
+* Models (iii)-(v): conservative advancement at sphere level (spec A4): gaps ``g`` and rates ``ġ`` of
+  all neighbour pairs of spheres in different aggregates, the acceleration bound
+  ``A = 2(Ω_a² R_max,a + Ω_b² R_max,b)`` of torque-free rotation, the global step
+  ``dt = η min t*`` with t* from :func:`~jaxcoag.aggregates.rigid.body.safe_time`, so a gap never closes
+  within a step (no tunnelling at any speed); a pair with ``g <= tol`` and ``ġ < 0`` is an event and is
+  resolved alone (coagulation by :func:`~jaxcoag.aggregates.rigid.body.merge`, restitution by
+  :func:`~jaxcoag.aggregates.rigid.body.restitute`). Rotation uses the symmetric splitting integrator
+  :func:`~jaxcoag.aggregates.rigid.body.rotate_free` with ``|ω| h <= 0.02``.
+* Neighbour structure (both schemes): a Verlet list of capacity ``K`` per sphere with cutoff
+  ``R_s + R_t + skin`` (pairs within one aggregate excluded), built from a uniform cell grid (cells no
+  smaller than the cutoff, at most ``cell_capacity`` spheres each; the 27 surrounding cells are searched)
+  in O(n0), or by an all-pairs scan when the cutoff exceeds L/3. It is rebuilt when a sphere may have
+  moved (or, in model ii, grown) by skin/2 since the last build, so no contact can be missed; overflow of
+  K or of a cell stops the run with status ``capacity_exceeded`` (raise ``neighbors`` /
+  ``cell_capacity``). Cost per collision and per step is therefore O(n0) with a small constant for the
+  global move and O(K) per sphere for the gaps.
+* Periodic images: minimum image per sphere pair (valid because the cutoff is below L/2); contacts of an
+  aggregate with its own image are not detected (spec A4.4; R95 is silent).
+
+Every collision is written to a log of fixed capacity (time, slots, outcome, impact energy, normal
+speed and, for models ii-v, the changes of linear and angular momentum and kinetic energy of the pair
+with their scales); a full log sets the status ``capacity_exceeded`` (the run continues, the counters
+stay exact, later collisions are not logged).
+
+Units: any consistent set (R95 uses a box of side 10 "arbitrary units"); cgs when the numbers are cgs.
+The Bridges law needs the velocity unit in cm/s (``v_unit``, default 1). The simulator is not
+differentiable (the event choice is discrete; ``lax.while_loop``).
+
+References: Richardson (1995, Icarus 115, 320) §§2.3-2.4, 3, Table I, eqs. (7)-(12), (13)-(28), (29)-(31);
+Bridges, Hatzes & Lin (1984, Nature 309, 333); Allen & Tildesley (1987) §5.3 (Verlet and cell lists);
+Mirtich (1996) (conservative advancement).
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..._engine import AbstractEngine, AbstractResult, evolve
+from ..._status import RESULTS, result_code, result_from_code
+from ..._validate import JaxcoagInputError, is_traced, require_x64
+from . import body
+from . import diagnostics as diag
+
+__all__ = ["Box", "BoxState", "RigidBox", "BoxResult", "box_model", "run", "MODELS"]
+
+#: The five test models of R95 Table I: (n0, r0, T, kind) with kind "fixed" (model i), "grow" (ii),
+#: "stick" (iii) or "threshold" (iv, v).
+MODELS = {
+    "i": (1000, 0.1, 8.2, "fixed"),
+    "ii": (1000, 0.1, 8.2, "grow"),
+    "iii": (1000, 0.1, 8.2, "stick"),
+    "iv": (1000, 0.1, 8.2, "threshold"),
+    "v": (9000, 0.033, 40.8, "threshold"),
+}
+_SPHERE_KINDS = ("fixed", "grow")
+#: log outcome codes
+COAGULATION, RESTITUTION = 1, 2
+_MAX_PACKING = 0.3
+
+
+# ------------------------------------------------------------------------------------------------ initial
+class Box(eqx.Module):
+    """Initial condition of a periodic-box run (build it with :func:`box_model`).
+
+    Fields:
+        model: "i" ... "v" (static; R95 Table I), which fixes the coagulation kind and outcome rule.
+        x: (n0, 3) sphere centres [length], inside [0, L)^3; v: (n0, 3) velocities [length/time].
+        radius: (n0,) sphere radii [length]; mass: (n0,) sphere masses [mass].
+        L: box side [length]; v0: speed of model (i) [length/time] (also its speed after a merge).
+        r0, m0: monomer radius and mass (units of the mass spectrum; model i keeps radius r0).
+        eps_n: normal coefficient of restitution in [0, 1], or a negative number for the velocity-dependent
+            law of Bridges et al. (1984) (the default of models iv, v).
+        mu_t, mu_p: tangential kinetic coefficients (R16, R17) in [0, 1] (R95 used 0).
+        e_thr: impact-energy threshold of the outcome rule [energy] (coagulation if E_imp < e_thr).
+        v_unit: cm/s per velocity unit (for the Bridges law only).
+        key: PRNG key (model i draws a random direction when a merged particle has zero momentum).
+    """
+
+    model: str = eqx.field(static=True)
+    x: jax.Array
+    v: jax.Array
+    radius: jax.Array
+    mass: jax.Array
+    L: jax.Array
+    v0: jax.Array
+    r0: jax.Array
+    m0: jax.Array
+    eps_n: jax.Array
+    mu_t: jax.Array
+    mu_p: jax.Array
+    e_thr: jax.Array
+    v_unit: jax.Array
+    key: jax.Array
+
+    @property
+    def kind(self) -> str:
+        """"fixed" (i), "grow" (ii), "stick" (iii) or "threshold" (iv, v)."""
+        return MODELS[self.model][3]
+
+    @property
+    def n0(self) -> int:
+        """Number of spheres (the capacity of every array)."""
+        return int(np.shape(self.x)[0])
+
+    @property
+    def alpha(self) -> float:
+        """Constant kernel of model (i), ``α = π (2 r0)² (4/3) v0 / L³`` [1/time] (R95 §3, eq. 29)."""
+        return float(math.pi * (2 * float(self.r0)) ** 2 * (4.0 / 3.0) * float(self.v0) / float(self.L) ** 3)
+
+
+def _key_array(key):
+    if key is None:
+        raise JaxcoagInputError("box_model needs key=jax.random.key(seed) (initial positions and velocities).")
+    if not (hasattr(key, "dtype") and jnp.issubdtype(key.dtype, jax.dtypes.prng_key)):
+        key = jax.random.wrap_key_data(jnp.asarray(key, jnp.uint32))
+    return key
+
+
+def _overlapping_pairs(x, radius, L):
+    """Index pairs (i < j) of spheres with |d| <= R_i + R_j (minimum image), by scipy's periodic KD tree."""
+    from scipy.spatial import cKDTree
+
+    xw = np.mod(x, L)
+    xw[xw >= L] = 0.0
+    tree = cKDTree(xw, boxsize=L)
+    pairs = tree.query_pairs(2.0 * float(np.max(radius)) * (1 + 1e-9), output_type="ndarray")
+    if len(pairs) == 0:
+        return pairs
+    d = xw[pairs[:, 1]] - xw[pairs[:, 0]]
+    d -= L * np.round(d / L)
+    touch = np.sqrt(np.sum(d * d, axis=1)) <= (radius[pairs[:, 0]] + radius[pairs[:, 1]]) * (1 + 1e-9)
+    return pairs[touch]
+
+
+def box_model(model, *, n0=None, r0=None, box=10.0, v0=1.0, key=None, m0=1.0, positions=None, velocities=None,
+              eps_n=None, mu_t=0.0, mu_p=0.0, e_thr=None, v_unit=1.0):
+    """Initial condition of one of the five test models of Richardson (1995) Table I.
+
+    Uniform random sphere centres in the cube ``[0, L)^3`` with no overlapping or touching pair (redrawn
+    until none), isotropic velocity directions, zero net momentum and zero spin (R95 §3). Model (i): every
+    speed equals ``v0`` (directions in antithetic pairs ``±v̂`` so that the net momentum is exactly zero for
+    even n0); models (ii)-(v): Maxwellian velocities, each component ``N(0, v0²/3)`` (rms speed v0; R95
+    does not print its speeds, spec ambiguity A8), minus the mean.
+
+    Arguments:
+        model: "i", "ii", "iii", "iv" or "v".
+        n0: number of spheres (default 1000; 9000 for "v").
+        r0: sphere radius [length] (default 0.1; 0.033 for "v").
+        box: box side L [length] (default 10).
+        v0: speed scale [length/time] (model i: the constant speed; others: the rms speed). R95 does not
+            print it; its t_1/2 suggests v0 ≈ 13 (spec A8); compare runs in τ = α n0 t / 2.
+        key: ``jax.random`` key (required).
+        m0: sphere mass [mass] (default 1: masses in units of m0).
+        positions, velocities: optional (n0, 3) arrays replacing the random draw (checked for overlaps).
+        eps_n: normal coefficient of restitution in [0, 1] (models iv, v); None: Bridges et al. (1984).
+        mu_t, mu_p: tangential coefficients (R16, R17) in [0, 1] (default 0, as R95).
+        e_thr: outcome threshold [energy]; None: the initial mean kinetic energy per particle (R95 §3).
+        v_unit: cm/s per velocity unit for the Bridges law (default 1).
+
+    Returns:
+        :class:`Box`.
+
+    Raises:
+        JaxcoagInputError: unknown model; non-positive sizes; a packing fraction n0 (4/3)π r0³ / L³ above
+        0.3; overlapping given spheres; restitution coefficients outside [0, 1].
+
+    References: Richardson (1995) §3 and Table I; Bridges, Hatzes & Lin (1984).
+    """
+    require_x64("rigid.box_model")
+    if not isinstance(model, str) or model not in MODELS:
+        raise JaxcoagInputError(f"unknown model {model!r}; choose one of {sorted(MODELS)} (Richardson 1995 Table I).")
+    dn0, dr0, _, kind = MODELS[model]
+    n0 = dn0 if n0 is None else n0
+    r0 = dr0 if r0 is None else r0
+    if isinstance(n0, bool) or not isinstance(n0, (int, np.integer)) or n0 < 2:
+        raise JaxcoagInputError(f"n0 must be an int >= 2 (number of spheres); got {n0!r}.")
+    n0 = int(n0)
+    vals = {}
+    for name, val in (("r0", r0), ("box", box), ("v0", v0), ("m0", m0), ("v_unit", v_unit)):
+        f = float(val) if np.ndim(val) == 0 else float("nan")
+        if not (math.isfinite(f) and f > 0):
+            raise JaxcoagInputError(f"{name} must be a finite number > 0; got {val!r}.")
+        vals[name] = f
+    r0, L, v0, m0, v_unit = vals["r0"], vals["box"], vals["v0"], vals["m0"], vals["v_unit"]
+    for name, val in (("eps_n", eps_n), ("mu_t", mu_t), ("mu_p", mu_p)):
+        if val is None:
+            continue
+        f = float(val) if np.ndim(val) == 0 else float("nan")
+        if not (0.0 <= f <= 1.0):
+            raise JaxcoagInputError(f"{name} must be a restitution coefficient in [0, 1]; got {val!r} "
+                                    "(eps_n=None selects the velocity-dependent law of Bridges et al. 1984).")
+    phi = n0 * (4.0 / 3.0) * math.pi * r0**3 / L**3
+    if phi > _MAX_PACKING:
+        raise JaxcoagInputError(f"the box is too small for {n0} spheres of radius {r0:g}: packing fraction "
+                                f"{phi:.3f} > {_MAX_PACKING}; enlarge box (L >= {(n0 * 4.19 * r0**3 / 0.3) ** (1 / 3):.3g}), "
+                                "or lower n0 or r0.")
+    if 2 * r0 >= L / 3:
+        raise JaxcoagInputError(f"r0 = {r0:g} is too large for box {L:g}: need 2 r0 < L/3.")
+    key = _key_array(key)
+    kx, kv, krun = jax.random.split(key, 3)
+    radius = np.full(n0, r0)
+    if positions is None:
+        x = np.array(jax.random.uniform(kx, (n0, 3), jnp.float64, 0.0, L))
+        for it in range(1000):
+            pairs = _overlapping_pairs(x, radius, L)
+            if len(pairs) == 0:
+                break
+            redo = np.unique(pairs[:, 1])
+            x[redo] = np.asarray(jax.random.uniform(jax.random.fold_in(kx, it + 1), (len(redo), 3), jnp.float64,
+                                                    0.0, L))
+        else:  # pragma: no cover - needs a packing fraction far above the limit
+            raise JaxcoagInputError("could not place the spheres without overlap; enlarge the box.")
+    else:
+        x = np.array(positions, np.float64)
+        if x.shape != (n0, 3) or not np.all(np.isfinite(x)):
+            raise JaxcoagInputError(f"positions must be a finite ({n0}, 3) array [length]; got shape {x.shape}.")
+        x = np.mod(x, L)
+        x[x >= L] = 0.0
+        pairs = _overlapping_pairs(x, radius, L)
+        if len(pairs):
+            i, j = pairs[0]
+            raise JaxcoagInputError(f"{len(pairs)} pairs of the given spheres overlap or touch (e.g. {i} and {j}); "
+                                    "give positions with every centre distance > 2 r0 (minimum image).")
+    if velocities is None:
+        if kind == "fixed":
+            half = (n0 + 1) // 2
+            d = np.array(jax.random.normal(kv, (half, 3), jnp.float64))
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            v = v0 * np.concatenate([d, -d])[:n0]
+        else:
+            v = np.array(jax.random.normal(kv, (n0, 3), jnp.float64)) * (v0 / math.sqrt(3.0))
+            v -= v.mean(axis=0, keepdims=True)
+    else:
+        v = np.array(velocities, np.float64)
+        if v.shape != (n0, 3) or not np.all(np.isfinite(v)):
+            raise JaxcoagInputError(f"velocities must be a finite ({n0}, 3) array; got shape {v.shape}.")
+    mass = np.full(n0, m0)
+    if e_thr is None:
+        e_thr = float(np.mean(0.5 * mass * np.sum(v * v, axis=1)))
+    elif not (np.ndim(e_thr) == 0 and math.isfinite(float(e_thr)) and float(e_thr) >= 0):
+        raise JaxcoagInputError(f"e_thr must be a finite energy >= 0; got {e_thr!r}.")
+    f = jnp.float64
+    return Box(model=model, x=jnp.asarray(x, f), v=jnp.asarray(v, f), radius=jnp.asarray(radius, f),
+               mass=jnp.asarray(mass, f), L=jnp.asarray(L, f), v0=jnp.asarray(v0, f), r0=jnp.asarray(r0, f),
+               m0=jnp.asarray(m0, f), eps_n=jnp.asarray(-1.0 if eps_n is None else float(eps_n), f),
+               mu_t=jnp.asarray(float(mu_t), f), mu_p=jnp.asarray(float(mu_p), f),
+               e_thr=jnp.asarray(float(e_thr), f), v_unit=jnp.asarray(v_unit, f), key=krun)
+
+
+# ------------------------------------------------------------------------------------------------ state
+class BoxState(eqx.Module):
+    """Engine state (fixed capacity n0; slot a of the aggregate arrays, sphere s of the sphere arrays).
+
+    Aggregate slots: ``alive``, COM ``X`` (wrapped) and ``V``, orientation ``q`` (body -> space), body
+    angular momentum ``Pi``, principal moments ``Ip``, mass ``M``, extent ``Rmax`` (R7), member count
+    ``nmem``, last collision partner ``last``. Spheres: owner ``sph_agg``, body offset ``sph_b``, radius
+    ``sph_R``, mass ``sph_m``. Models (i)-(ii) use slot s = sphere s (``sph_b`` = 0). Neighbour list
+    ``nb`` (n0, K) (``n0`` = empty) with reference positions ``x_ref`` and radii ``r_ref`` of its build;
+    event-driven predictions ``tc``/``partner`` and the rebuild time ``t_rebuild`` (models i-ii).
+    Counters: collisions ``n_c``, first-time collisions ``n_c1``, coagulations ``n_coag``, restitutions
+    ``n_rest``, loop iterations ``n_steps``, rebuilds ``n_build``; ``nc_max`` (static) cells per box side; ``flags`` bit 0 log full, bit 1
+    neighbour/cell overflow, bit 2 step budget spent. ``log`` holds the collision log (dict of (E,) arrays)
+    and ``n_log`` its fill; ``par`` the physical parameters (dict of scalars).
+    """
+
+    model: str = eqx.field(static=True)
+    nc_max: int = eqx.field(static=True)
+    t: jax.Array
+    alive: jax.Array
+    X: jax.Array
+    V: jax.Array
+    q: jax.Array
+    Pi: jax.Array
+    Ip: jax.Array
+    M: jax.Array
+    Rmax: jax.Array
+    nmem: jax.Array
+    last: jax.Array
+    sph_agg: jax.Array
+    sph_b: jax.Array
+    sph_R: jax.Array
+    sph_m: jax.Array
+    nb: jax.Array
+    x_ref: jax.Array
+    r_ref: jax.Array
+    tc: jax.Array
+    partner: jax.Array
+    t_rebuild: jax.Array
+    n_c: jax.Array
+    n_c1: jax.Array
+    n_coag: jax.Array
+    n_rest: jax.Array
+    n_steps: jax.Array
+    n_build: jax.Array
+    flags: jax.Array
+    n_log: jax.Array
+    log: dict
+    par: dict
+    key: jax.Array
+
+    @property
+    def kind(self) -> str:
+        return MODELS[self.model][3]
+
+
+_LOG_FLOAT = ("t", "e_imp", "u_n", "m_a", "m_b", "dP", "dL", "dKE", "P_scale", "L_scale", "KE")
+_LOG_INT = ("a", "b", "outcome")
+
+
+def _mimg(d, L):
+    """Minimum-image separation in a periodic cube of side L."""
+    return d - L * jnp.round(d / L)
+
+
+def _wrap(x, L):
+    x = jnp.mod(x, L)
+    return jnp.where(x >= L, 0.0, x)
+
+
+def _rot(q):
+    """(n, 3, 3) rotation matrices of (n, 4) quaternions."""
+    return jax.vmap(body.matrix_from_quat)(q)
+
+
+def _sphere_pos(st):
+    """Space positions (wrapped), unwrapped offsets A b and velocities of every sphere."""
+    A = _rot(st.q)[st.sph_agg]  # (n, 3, 3)
+    r = jnp.einsum("nij,nj->ni", A, st.sph_b)
+    w = jax.vmap(body.omega_space)(st.q, st.Pi, st.Ip)[st.sph_agg]
+    x = _wrap(st.X[st.sph_agg] + r, st.par["L"])
+    u = st.V[st.sph_agg] + jnp.cross(w, r)
+    return x, r, u
+
+
+# ------------------------------------------------------------------------------------------------ neighbours
+def _build_neighbors(x, R, group, active, L, skin, K, C, nc_max, dynamic=True):
+    """Verlet list (n, K) with cutoff R_i + R_j + skin, pairs of the same ``group`` excluded.
+
+    Uniform cell grid (side ``L / nc``, nc = floor(L / (2 max R + skin)) <= nc_max, at most C spheres per cell,
+    27 cells searched) when nc >= 3, else an all-pairs scan row by row. Returns (nb, overflow) with
+    ``n`` marking empty entries.
+    """
+    n = x.shape[0]
+    Rmax_ = jnp.max(jnp.where(active, R, 0.0))
+    rc = 2.0 * Rmax_ + skin
+    nc = jnp.clip(jnp.floor(L / rc), 1, nc_max).astype(jnp.int32)
+    idx = jnp.arange(n)
+
+    def select(i, cand):
+        valid = cand < n
+        cj = jnp.where(valid, cand, 0)
+        d = _mimg(x[cj] - x[i][None, :], L)
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        ok = valid & active[cj] & active[i] & (cj != i) & (group[cj] != group[i]) & (dist < R[i] + R[cj] + skin)
+        pos = jnp.cumsum(ok) - 1  # compaction of the accepted candidates into the first K entries
+        row = jnp.full(K, n, jnp.int32).at[jnp.where(ok, pos, K)].set(cj.astype(jnp.int32), mode="drop")
+        return row, pos[-1] >= K
+
+    def by_cells(_):
+        h = L / nc.astype(jnp.float64)
+        ci = jnp.clip(jnp.floor(x / h).astype(jnp.int32), 0, nc - 1)
+        cid = ci[:, 0] + nc * (ci[:, 1] + nc * ci[:, 2])
+        ncell = nc_max**3
+        cid = jnp.where(active, cid, ncell)
+        order = jnp.argsort(cid)
+        sc = cid[order]
+        cells = jnp.arange(ncell)
+        start = jnp.searchsorted(sc, cells, side="left")
+        count = jnp.searchsorted(sc, cells, side="right") - start
+        over_cell = jnp.any(count > C)
+        off = jnp.stack(jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij"),
+                        -1).reshape(27, 3)
+
+        def row(i):
+            c3 = jnp.mod(ci[i][None, :] + off, nc)
+            cc = c3[:, 0] + nc * (c3[:, 1] + nc * c3[:, 2])  # (27,)
+            slot = start[cc][:, None] + jnp.arange(C)[None, :]
+            ok = jnp.arange(C)[None, :] < count[cc][:, None]
+            cand = jnp.where(ok, order[jnp.clip(slot, 0, n - 1)], n).reshape(-1)
+            return select(i, cand)
+
+        nb, over = jax.lax.map(row, idx, batch_size=min(n, 1024))
+        return nb, jnp.any(over) | over_cell
+
+    def all_pairs(_):
+        nb, over = jax.lax.map(lambda i: select(i, idx), idx, batch_size=min(n, 64))
+        return nb, jnp.any(over)
+
+    if nc_max < 3:
+        return all_pairs(None)
+    if not dynamic:  # radii never grow: nc_max (from the largest radius at the start) is the grid
+        nc = jnp.int32(nc_max)
+        return by_cells(None)
+    return jax.lax.cond(nc >= 3, by_cells, all_pairs, None)
+
+
+# ------------------------------------------------------------------------------------------------ engine
+class RigidBox(AbstractEngine):
+    """Engine of the periodic box of spheres / rigid aggregates (R95 §3; module docstring for the scheme).
+
+    Fields (static: they fix the compiled program):
+        neighbors: Verlet-list capacity K per sphere (default 48).
+        cell_capacity: spheres per grid cell C (default 16).
+        skin: Verlet skin in units of r0 (cutoff R_s + R_t + skin r0); default 12 for the sphere models (i, ii:
+            fewer rebuilds of the event predictions) and 6 for the aggregate models.
+        log_capacity: collision-log capacity (default 20000).
+        max_steps: loop-iteration budget over the whole run (status ``max_steps_reached`` when spent).
+        tol: contact gap tolerance of conservative advancement, in units of r0 (default 1e-6).
+        eta: fraction of the safe time taken per step (default 0.9).
+        n_rot: maximum rotation substeps per step (|ω| h <= 0.02 per substep; the step is capped to match;
+            the substep count is global, so a step costs as many substeps as its fastest spinner needs).
+    """
+
+    neighbors: int = eqx.field(static=True, default=48)
+    cell_capacity: int = eqx.field(static=True, default=16)
+    skin: float | None = eqx.field(static=True, default=None)
+    log_capacity: int = eqx.field(static=True, default=20000)
+    max_steps: int = eqx.field(static=True, default=50_000_000)
+    tol: float = eqx.field(static=True, default=1e-6)
+    eta: float = eqx.field(static=True, default=0.9)
+    n_rot: int = eqx.field(static=True, default=64)
+
+    def __check_init__(self):
+        for name in ("neighbors", "cell_capacity", "log_capacity", "max_steps", "n_rot"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise JaxcoagInputError(f"RigidBox({name}=...) must be an int >= 1; got {v!r}.")
+        for name in ("skin", "tol", "eta"):
+            v = getattr(self, name)
+            if v is None and name == "skin":
+                continue
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise JaxcoagInputError(f"RigidBox({name}=...) must be a number > 0; got {v!r}.")
+        if self.eta >= 1.0:
+            raise JaxcoagInputError(f"RigidBox(eta=...) must be in (0, 1) (fraction of the safe time); got {self.eta}.")
+
+    @property
+    def name(self) -> str:
+        return "rigid"
+
+    # -------------------------------------------------------------------------------- protocol
+    def _check(self, kernel, initial, t_out, t0, outcome, key):
+        if kernel is not None:
+            raise JaxcoagInputError("the rigid box simulates its collisions explicitly: pass kernel=None.")
+        if outcome is not None:
+            raise JaxcoagInputError("the rigid box has its own outcome rule (R95 §3, the model): pass outcome=None.")
+        if isinstance(initial, BoxResult):
+            return
+        if not isinstance(initial, Box):
+            raise JaxcoagInputError(f"initial must be a rigid.Box (rigid.box_model(...)) or a BoxResult to continue; "
+                                    f"got {type(initial).__name__}.")
+
+    def _init(self, kernel, initial, t0, outcome, key):
+        if isinstance(initial, BoxResult):
+            return initial.final_state
+        b = initial
+        n = b.n0
+        f = jnp.float64
+        par = dict(L=b.L, v0=b.v0, r0=b.r0, m0=b.m0, eps_n=b.eps_n, mu_t=b.mu_t, mu_p=b.mu_p, e_thr=b.e_thr,
+                   v_unit=b.v_unit)
+        skin = self.skin if self.skin is not None else (12.0 if b.kind in _SPHERE_KINDS else 6.0)
+        par["skin"] = skin * b.r0
+        par = {k: jnp.asarray(v, f) for k, v in par.items()}
+        R = jnp.asarray(b.radius, f)
+        m = jnp.asarray(b.mass, f)
+        Ip1 = 0.4 * m * R * R
+        log = {k: jnp.zeros(self.log_capacity, f) for k in _LOG_FLOAT}
+        log.update({k: jnp.zeros(self.log_capacity, jnp.int32) for k in _LOG_INT})
+        rc = 2 * float(np.max(np.asarray(b.radius))) + float(par["skin"])
+        nc_max = int(min(max(math.floor(float(b.L) / rc), 1), 64))
+        st = BoxState(
+            model=b.model, nc_max=nc_max, t=jnp.asarray(t0, f), alive=jnp.ones(n, bool), X=jnp.asarray(b.x, f),
+            V=jnp.asarray(b.v, f), q=jnp.tile(jnp.array([1.0, 0, 0, 0], f), (n, 1)), Pi=jnp.zeros((n, 3), f),
+            Ip=jnp.stack([Ip1, Ip1, Ip1], -1), M=m, Rmax=R, nmem=jnp.ones(n, jnp.int32),
+            last=jnp.full(n, -1, jnp.int32), sph_agg=jnp.arange(n, dtype=jnp.int32), sph_b=jnp.zeros((n, 3), f),
+            sph_R=R, sph_m=m, nb=jnp.full((n, self.neighbors), n, jnp.int32), x_ref=jnp.asarray(b.x, f), r_ref=R,
+            tc=jnp.full(n, jnp.inf, f), partner=jnp.full(n, n, jnp.int32), t_rebuild=jnp.asarray(-jnp.inf, f),
+            n_c=jnp.int32(0), n_c1=jnp.int32(0), n_coag=jnp.int32(0), n_rest=jnp.int32(0), n_steps=jnp.int32(0),
+            n_build=jnp.int32(0), flags=jnp.int32(0), n_log=jnp.int32(0), log=log, par=par, key=b.key)
+        return st
+
+    def _advance(self, kernel, state, t_seg, outcome):
+        return _advance_jit(self, state, jnp.asarray(t_seg, jnp.float64), state.nc_max)
+
+    def _result(self, kernel, t, outs, state, outcome):
+        code = outs["status"][-1]
+        return BoxResult(t=jnp.asarray(t), status=result_from_code(code), outs=outs, final_state=state,
+                         model=state.model)
+
+
+# ------------------------------------------------------------------------------------------------ outputs
+def _outputs(st, code):
+    """One output record (module docstring of :class:`BoxResult` for the fields)."""
+    x, r, u = _sphere_pos(st)
+    w = jax.vmap(body.omega_space)(st.q, st.Pi, st.Ip)
+    ke_t = 0.5 * st.M * jnp.sum(st.V * st.V, axis=-1)
+    ke_r = jax.vmap(body.kinetic_energy_rot)(st.Pi, st.Ip)
+    al = st.alive
+    del w, u, x
+    return dict(
+        alive=al, M=jnp.where(al, st.M, 0.0), nmem=jnp.where(al, st.nmem, 0), Rmax=jnp.where(al, st.Rmax, 0.0),
+        V=jnp.where(al[:, None], st.V, 0.0), ke_trans=jnp.where(al, ke_t, 0.0), ke_rot=jnp.where(al, ke_r, 0.0),
+        sph_agg=st.sph_agg, sph_r=jnp.sqrt(jnp.sum(r * r, axis=-1)),
+        n_aggregates=jnp.sum(al).astype(jnp.int32), n_c=st.n_c, n_c1=st.n_c1, n_coag=st.n_coag, n_rest=st.n_rest,
+        n_steps=st.n_steps, n_build=st.n_build, flags=st.flags, status=code)
+
+
+def _status_code(st):
+    c = jnp.int32(0)
+    c = jnp.where((st.flags & 1) != 0, result_code(RESULTS.capacity_exceeded), c)
+    c = jnp.where((st.flags & 2) != 0, result_code(RESULTS.capacity_exceeded), c)
+    c = jnp.where((st.flags & 4) != 0, result_code(RESULTS.max_steps_reached), c)
+    return c
+
+
+def _record(outs, k, st):
+    rec = _outputs(st, _status_code(st))
+    return jax.tree_util.tree_map(lambda o, r: o.at[k].set(r), outs, rec)
+
+
+def _empty_outputs(st, T):
+    shapes = jax.eval_shape(lambda s: _outputs(s, jnp.int32(0)), st)
+    return jax.tree_util.tree_map(lambda a: jnp.zeros((T,) + a.shape, a.dtype), shapes)
+
+
+def _stopped(st):
+    return (st.flags & 6) != 0
+
+
+def _write_log(st, rec):
+    i = st.n_log
+    full = i >= st.log["t"].shape[0]
+    log = {k: st.log[k].at[i].set(jnp.asarray(rec[k], st.log[k].dtype), mode="drop") for k in st.log}
+    return eqx.tree_at(lambda s: (s.log, s.n_log, s.flags), st,
+                       (log, jnp.where(full, i, i + 1), st.flags | jnp.where(full, 1, 0)))
+
+
+# ------------------------------------------------------------------------------------------------ spheres (i, ii)
+def _sphere_row(st, i):
+    """Earliest predicted impact (absolute time, partner) of sphere i over its neighbour list."""
+    n = st.alive.shape[0]
+    j = st.nb[i]
+    valid = (j < n)
+    jj = jnp.where(valid, j, 0)
+    valid = valid & st.alive[jj] & st.alive[i] & (jj != i)
+    d = _mimg(st.X[jj] - st.X[i][None, :], st.par["L"])
+    uu = st.V[jj] - st.V[i][None, :]
+    toi = body.sphere_toi(d, uu, st.sph_R[jj] + st.sph_R[i])
+    toi = jnp.where(valid, toi, jnp.inf)
+    k = jnp.argmin(toi)
+    return st.t + toi[k], jnp.where(jnp.isfinite(toi[k]), jj[k], n).astype(jnp.int32)
+
+
+def _sphere_horizon(st, i):
+    """Time at which sphere i may have used half of the skin (displacement plus radius growth)."""
+    disp = _mimg(st.X[i] - st.x_ref[i], st.par["L"])
+    used = jnp.sqrt(jnp.sum(disp * disp)) + (st.sph_R[i] - st.r_ref[i])
+    spd = jnp.sqrt(jnp.sum(st.V[i] * st.V[i]))
+    room = 0.5 * st.par["skin"] - used
+    return jnp.where(room <= 0, st.t, jnp.where(spd > 0, st.t + room / jnp.where(spd > 0, spd, 1.0), jnp.inf))
+
+
+def _sphere_rebuild(engine, st, nc_max):
+    n = st.alive.shape[0]
+    skin = st.par["skin"]
+    nb, over = _build_neighbors(st.X, st.sph_R, jnp.arange(n), st.alive, st.par["L"], skin, engine.neighbors,
+                                engine.cell_capacity, nc_max, dynamic=st.kind == "grow")
+    st = eqx.tree_at(lambda s: (s.nb, s.x_ref, s.r_ref, s.n_build, s.flags), st,
+                     (nb, st.X, st.sph_R, st.n_build + 1, st.flags | jnp.where(over, 2, 0)))
+    tc, partner = jax.vmap(lambda i: _sphere_row(st, i))(jnp.arange(n))
+    spd = jnp.sqrt(jnp.sum(st.V * st.V, axis=-1))
+    vmax = jnp.max(jnp.where(st.alive, spd, 0.0))
+    t_rb = jnp.where(vmax > 0, st.t + 0.5 * skin / jnp.where(vmax > 0, vmax, 1.0), jnp.inf)
+    return eqx.tree_at(lambda s: (s.tc, s.partner, s.t_rebuild), st, (tc, partner, t_rb))
+
+
+def _sphere_collide(engine, st, i):
+    """Merge sphere i with its predicted partner (R95 §3 models i, ii) and update the predictions."""
+    n = st.alive.shape[0]
+    p = st.partner[i]
+    a, b = jnp.minimum(i, p), jnp.maximum(i, p)
+    L = st.par["L"]
+    ma, mb = st.M[a], st.M[b]
+    Mn = ma + mb
+    d = _mimg(st.X[b] - st.X[a], L)
+    Xn = st.X[a] + (mb / Mn) * d
+    P = ma * st.V[a] + mb * st.V[b]
+    Vm = P / Mn
+    if st.kind == "fixed":
+        key = jax.random.fold_in(st.key, st.n_c)
+        rnd = jax.random.normal(key, (3,), jnp.float64)
+        pn = jnp.sqrt(jnp.sum(P * P))
+        dirn = jnp.where(pn > 0, P / jnp.where(pn > 0, pn, 1.0), rnd / jnp.sqrt(jnp.sum(rnd * rnd)))
+        Vn = st.par["v0"] * dirn
+        Rn = st.par["r0"]
+    else:
+        Vn = Vm
+        Rn = st.par["r0"] * jnp.cbrt(Mn / st.par["m0"])
+    uab = st.V[b] - st.V[a]
+    dn = d / jnp.sqrt(jnp.sum(d * d))
+    un = jnp.sum(uab * dn)
+    e_imp = 0.5 * ma * mb / Mn * jnp.sum(uab * uab)
+    ke0 = 0.5 * ma * jnp.sum(st.V[a] ** 2) + 0.5 * mb * jnp.sum(st.V[b] ** 2)
+    ke1 = 0.5 * Mn * jnp.sum(Vn * Vn)
+    # angular momentum about the new centre (orbital part; spheres carry no spin in models i, ii)
+    L0 = ma * jnp.cross(st.X[a] - Xn, st.V[a]) + mb * jnp.cross(st.X[a] + d - Xn, st.V[b])
+    rec = dict(t=st.t, e_imp=e_imp, u_n=un, m_a=ma, m_b=mb, dP=jnp.sqrt(jnp.sum((Mn * Vn - P) ** 2)),
+               dL=jnp.sqrt(jnp.sum(L0 * L0)), dKE=ke1 - ke0,
+               P_scale=ma * jnp.sqrt(jnp.sum(st.V[a] ** 2)) + mb * jnp.sqrt(jnp.sum(st.V[b] ** 2)),
+               L_scale=(ma + mb) * jnp.sqrt(jnp.sum(d * d)) * jnp.sqrt(jnp.sum(uab * uab)), KE=ke0, a=a, b=b,
+               outcome=COAGULATION)
+    first = ~((st.last[a] == b) | (st.last[b] == a))
+    st = eqx.tree_at(
+        lambda s: (s.X, s.V, s.M, s.sph_R, s.sph_m, s.Rmax, s.nmem, s.alive, s.last, s.n_c, s.n_c1, s.n_coag,
+                   s.tc, s.partner, s.Ip),
+        st,
+        (st.X.at[a].set(_wrap(Xn, L)), st.V.at[a].set(Vn).at[b].set(0.0), st.M.at[a].set(Mn).at[b].set(0.0),
+         st.sph_R.at[a].set(Rn), st.sph_m.at[a].set(Mn), st.Rmax.at[a].set(Rn).at[b].set(0.0),
+         st.nmem.at[a].add(st.nmem[b]).at[b].set(0), st.alive.at[b].set(False), st.last.at[a].set(b),
+         st.n_c + 1, st.n_c1 + first.astype(jnp.int32), st.n_coag + 1, st.tc.at[b].set(jnp.inf),
+         st.partner.at[b].set(n), st.Ip.at[a].set(jnp.full(3, 0.4 * Mn * Rn * Rn))))
+    st = _write_log(st, rec)
+    # predictions: row a in full; neighbours of a or b whose partner was a or b in full; others min with a
+    ta, pa = _sphere_row(st, a)
+    cand = jnp.concatenate([st.nb[a], st.nb[b]])
+    cj = jnp.where(cand < n, cand, 0)
+    use = (cand < n) & (cj != a) & st.alive[cj]
+    stale = (st.partner[cj] == a) | (st.partner[cj] == b)
+    full_t, full_p = jax.vmap(lambda j: _sphere_row(st, j))(cj)
+    dj = _mimg(st.X[a][None, :] - st.X[cj], L)
+    tj = st.t + body.sphere_toi(dj, st.V[a][None, :] - st.V[cj], st.sph_R[a] + st.sph_R[cj])
+    better = tj < st.tc[cj]
+    new_t = jnp.where(stale, full_t, jnp.where(better, tj, st.tc[cj]))
+    new_p = jnp.where(stale, full_p, jnp.where(better, a, st.partner[cj])).astype(jnp.int32)
+    tgt = jnp.where(use, cj, n)
+    tc = st.tc.at[tgt].set(new_t, mode="drop").at[a].set(ta)
+    partner = st.partner.at[tgt].set(new_p, mode="drop").at[a].set(pa)
+    hz = _sphere_horizon(st, a)
+    return eqx.tree_at(lambda s: (s.tc, s.partner, s.t_rebuild), st, (tc, partner, jnp.minimum(st.t_rebuild, hz)))
+
+
+def _sphere_loop(engine, st, t_seg, nc_max):
+    T = t_seg.shape[0]
+    n = st.alive.shape[0]
+    outs0 = _empty_outputs(st, T)
+
+    def cond(c):
+        st, k, _ = c
+        return k < T
+
+    def body_fn(c):
+        st, k, outs = c
+        target = t_seg[k]
+        i = jnp.argmin(jnp.where(st.alive, st.tc, jnp.inf)).astype(jnp.int32)
+        t_col = jnp.where(st.alive[i], st.tc[i], jnp.inf)
+        stop = _stopped(st) | (st.n_steps >= engine.max_steps)
+        which = jnp.where(stop, 2, jnp.where((st.t_rebuild <= t_col) & (st.t_rebuild <= target), 1,
+                                             jnp.where(t_col <= target, 0, 2)))
+        t_new = jnp.where(which == 0, t_col, jnp.where(which == 1, jnp.maximum(st.t_rebuild, st.t), target))
+        t_new = jnp.where(stop, st.t, jnp.maximum(t_new, st.t))
+        dt = t_new - st.t
+        st = eqx.tree_at(lambda s: (s.X, s.t, s.n_steps, s.flags), st,
+                         (jnp.where(st.alive[:, None], _wrap(st.X + st.V * dt, st.par["L"]), st.X), t_new,
+                          st.n_steps + 1,
+                          st.flags | jnp.where(st.n_steps + 1 >= engine.max_steps, 4, 0)))
+        st, outs = jax.lax.switch(which, [lambda s, o: (_sphere_collide(engine, s, i), o),
+                                          lambda s, o: (_sphere_rebuild(engine, s, nc_max), o),
+                                          lambda s, o: (s, _record(o, k, s))], st, outs)
+        return st, k + jnp.where(which == 2, 1, 0), outs
+
+    st, _, outs = jax.lax.while_loop(cond, body_fn, (st, jnp.int32(0), outs0))
+    del n
+    return st, outs
+
+
+# ------------------------------------------------------------------------------------------------ aggregates (iii-v)
+def _agg_rebuild(engine, st, x, nc_max):
+    nb, over = _build_neighbors(x, st.sph_R, st.sph_agg, jnp.ones(x.shape[0], bool), st.par["L"], st.par["skin"],
+                                engine.neighbors, engine.cell_capacity, nc_max, dynamic=False)
+    return eqx.tree_at(lambda s: (s.nb, s.x_ref, s.n_build, s.flags), st,
+                       (nb, x, st.n_build + 1, st.flags | jnp.where(over, 2, 0)))
+
+
+def _agg_event(engine, st, s, t, x, r):
+    """Resolve the contact of sphere s (aggregate a) with sphere t (aggregate b): coagulation (R8-R12) or
+    restitution (R13-R28) by the outcome rule of the model (R95 §3)."""
+    n = st.alive.shape[0]
+    a, b = st.sph_agg[s], st.sph_agg[t]
+    lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
+    L = st.par["L"]
+    d = _mimg(x[t] - x[s], L)
+    dist = jnp.sqrt(jnp.sum(d * d))
+    nhat = d / dist
+    Xa = st.X[a]
+    Xb = Xa + r[s] + d - r[t]  # the image of b touching a
+    rc = Xa + r[s] + d * (st.sph_R[s] / (st.sph_R[s] + st.sph_R[t]))
+    ma, mb = st.M[a], st.M[b]
+    Va, Vb = st.V[a], st.V[b]
+    mu = ma * mb / (ma + mb)
+    dv = Vb - Va
+    e_imp = 0.5 * mu * jnp.sum(dv * dv)
+    wa = body.omega_space(st.q[a], st.Pi[a], st.Ip[a])
+    wb = body.omega_space(st.q[b], st.Pi[b], st.Ip[b])
+    c1, c2 = rc - Xa, rc - Xb
+    u_n = jnp.sum(((Vb + jnp.cross(wb, c2)) - (Va + jnp.cross(wa, c1))) * nhat)
+    hA = body.angular_momentum_space(st.q[a], st.Pi[a])
+    hB = body.angular_momentum_space(st.q[b], st.Pi[b])
+    ke0 = (0.5 * ma * jnp.sum(Va * Va) + 0.5 * mb * jnp.sum(Vb * Vb) + body.kinetic_energy_rot(st.Pi[a], st.Ip[a])
+           + body.kinetic_energy_rot(st.Pi[b], st.Ip[b]))
+    P0 = ma * Va + mb * Vb
+    L0 = ma * jnp.cross(Xa - rc, Va) + mb * jnp.cross(Xb - rc, Vb) + hA + hB
+    P_scale = ma * jnp.sqrt(jnp.sum(Va * Va)) + mb * jnp.sqrt(jnp.sum(Vb * Vb))
+    L_scale = (ma * jnp.sqrt(jnp.sum((Xa - rc) ** 2)) * jnp.sqrt(jnp.sum(Va * Va))
+               + mb * jnp.sqrt(jnp.sum((Xb - rc) ** 2)) * jnp.sqrt(jnp.sum(Vb * Vb))
+               + jnp.sqrt(jnp.sum(hA * hA)) + jnp.sqrt(jnp.sum(hB * hB)))
+    first = ~((st.last[a] == b) | (st.last[b] == a))
+    coag = (e_imp < st.par["e_thr"]) if st.kind == "threshold" else jnp.asarray(True)
+
+    def coagulate(st):
+        in_a = st.sph_agg == a
+        in_b = st.sph_agg == b
+        mask = in_a | in_b
+        sx = jnp.where(in_b[:, None], Xb[None, :] + r, Xa[None, :] + r)
+        X, V, q, Pi, Ip, bnew, Rm = body.merge(Xa, Va, st.q[a], st.Pi[a], st.Ip[a], ma, Xb, Vb, st.q[b], st.Pi[b],
+                                               st.Ip[b], mb, sx, st.sph_m, st.sph_R, mask)
+        P1 = (ma + mb) * V
+        L1 = (ma + mb) * jnp.cross(X - rc, V) + body.angular_momentum_space(q, Pi)
+        ke1 = 0.5 * (ma + mb) * jnp.sum(V * V) + body.kinetic_energy_rot(Pi, Ip)
+        st = eqx.tree_at(
+            lambda s: (s.X, s.V, s.q, s.Pi, s.Ip, s.M, s.Rmax, s.nmem, s.alive, s.last, s.sph_b, s.sph_agg,
+                       s.n_coag),
+            st,
+            (st.X.at[lo].set(_wrap(X, L)), st.V.at[lo].set(V).at[hi].set(0.0), st.q.at[lo].set(q),
+             st.Pi.at[lo].set(Pi).at[hi].set(0.0), st.Ip.at[lo].set(Ip), st.M.at[lo].set(ma + mb).at[hi].set(0.0),
+             st.Rmax.at[lo].set(Rm).at[hi].set(0.0), st.nmem.at[lo].set(st.nmem[a] + st.nmem[b]).at[hi].set(0),
+             st.alive.at[hi].set(False), st.last.at[lo].set(hi), jnp.where(mask[:, None], bnew, st.sph_b),
+             jnp.where(mask, lo, st.sph_agg).astype(jnp.int32), st.n_coag + 1))
+        return st, P1, L1, ke1, jnp.int32(COAGULATION)
+
+    def restitute(st):
+        Ia = body.inertia_inv_space(st.q[a], st.Ip[a])
+        Ib = body.inertia_inv_space(st.q[b], st.Ip[b])
+        eps = jnp.where(st.par["eps_n"] < 0, body.bridges_epsilon(jnp.abs(u_n), v_unit=st.par["v_unit"]),
+                        st.par["eps_n"])
+        dV1, dV2, dw1, dw2 = body.restitute(ma, mb, Ia, Ib, c1, c2, Va, Vb, wa, wb, nhat, eps, st.par["mu_t"],
+                                            st.par["mu_p"])
+        V1, V2 = Va + dV1, Vb + dV2
+        Pi1 = body.pi_from_omega_space(st.q[a], wa + dw1, st.Ip[a])
+        Pi2 = body.pi_from_omega_space(st.q[b], wb + dw2, st.Ip[b])
+        P1 = ma * V1 + mb * V2
+        L1 = (ma * jnp.cross(Xa - rc, V1) + mb * jnp.cross(Xb - rc, V2) + body.angular_momentum_space(st.q[a], Pi1)
+              + body.angular_momentum_space(st.q[b], Pi2))
+        ke1 = (0.5 * ma * jnp.sum(V1 * V1) + 0.5 * mb * jnp.sum(V2 * V2) + body.kinetic_energy_rot(Pi1, st.Ip[a])
+               + body.kinetic_energy_rot(Pi2, st.Ip[b]))
+        st = eqx.tree_at(lambda s: (s.V, s.Pi, s.last, s.n_rest), st,
+                         (st.V.at[a].set(V1).at[b].set(V2), st.Pi.at[a].set(Pi1).at[b].set(Pi2),
+                          st.last.at[a].set(b).at[b].set(a), st.n_rest + 1))
+        return st, P1, L1, ke1, jnp.int32(RESTITUTION)
+
+    st, P1, L1, ke1, outcome = jax.lax.cond(coag, coagulate, restitute, st)
+    rec = dict(t=st.t, e_imp=e_imp, u_n=u_n, m_a=ma, m_b=mb, dP=jnp.sqrt(jnp.sum((P1 - P0) ** 2)),
+               dL=jnp.sqrt(jnp.sum((L1 - L0) ** 2)), dKE=ke1 - ke0, P_scale=P_scale, L_scale=L_scale, KE=ke0, a=a,
+               b=b, outcome=outcome)
+    st = eqx.tree_at(lambda s: (s.n_c, s.n_c1), st, (st.n_c + 1, st.n_c1 + first.astype(jnp.int32)))
+    del n
+    return _write_log(st, rec)
+
+
+def _agg_advance(engine, st, dt, Om):
+    # one substep count for all bodies (|ω| h <= 0.02 for the fastest spinner; spec A3)
+    nsub = jnp.clip(jnp.ceil(jnp.max(Om) * dt / 0.02), 1, engine.n_rot).astype(jnp.int32)
+    h = dt / nsub.astype(jnp.float64)
+    q, Pi = jax.lax.fori_loop(0, nsub, lambda _, qp: jax.vmap(
+        lambda q, p, i: body.rotate_free(q, p, i, h, 1))(qp[0], qp[1], st.Ip), (st.q, st.Pi))
+    X = jnp.where(st.alive[:, None], _wrap(st.X + st.V * dt, st.par["L"]), st.X)
+    return eqx.tree_at(lambda s: (s.X, s.q, s.Pi, s.t), st, (X, q, Pi, st.t + dt))
+
+
+def _agg_loop(engine, st, t_seg, nc_max):
+    T = t_seg.shape[0]
+    n = st.alive.shape[0]
+    tol = engine.tol * st.par["r0"]
+    skin = st.par["skin"]
+
+    def cond(c):
+        return c[1] < T
+
+    def body_fn(c):
+        st, k, outs = c
+        target = t_seg[k]
+        x, r, u = _sphere_pos(st)
+        dsp = _mimg(x - st.x_ref, st.par["L"])
+        disp = jnp.sqrt(jnp.max(jnp.sum(dsp * dsp, axis=-1)))
+        st = jax.lax.cond((disp > 0.4 * skin) | (st.n_build == 0), lambda s: _agg_rebuild(engine, s, x, nc_max),
+                          lambda s: s, st)
+        dsp = _mimg(x - st.x_ref, st.par["L"])
+        disp = jnp.sqrt(jnp.max(jnp.sum(dsp * dsp, axis=-1)))
+        j = st.nb
+        valid = j < n
+        jj = jnp.where(valid, j, 0)
+        ga, gb = st.sph_agg[:, None], st.sph_agg[jj]
+        valid = valid & (ga != gb)
+        d = _mimg(x[jj] - x[:, None, :], st.par["L"])
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        g = dist - (st.sph_R[:, None] + st.sph_R[jj])
+        gdot = jnp.sum(d * (u[jj] - u[:, None, :]), axis=-1) / jnp.where(dist > 0, dist, 1.0)
+        Om = jax.vmap(body.max_spin)(st.Pi, st.Ip)
+        acc = Om * Om * st.Rmax
+        A = 2.0 * (acc[ga] + acc[gb])
+        ev = valid & (g <= tol) & (gdot < 0)
+        flat = jnp.argmin(jnp.where(ev, gdot, jnp.inf).reshape(-1))
+        s_ev, t_ev = (flat // j.shape[1]).astype(jnp.int32), jj.reshape(-1)[flat].astype(jnp.int32)
+        any_ev = jnp.any(ev)
+        tstar = jnp.min(jnp.where(valid, body.safe_time(g, gdot, A), jnp.inf))
+        spd = jnp.where(st.alive, jnp.sqrt(jnp.sum(st.V * st.V, axis=-1)) + Om * st.Rmax, 0.0)
+        vmax = jnp.max(spd)
+        dt_skin = jnp.where(vmax > 0, (0.5 * skin - disp) / jnp.where(vmax > 0, vmax, 1.0), jnp.inf)
+        ommax = jnp.max(jnp.where(st.alive, Om, 0.0))
+        dt_rot = jnp.where(ommax > 0, engine.n_rot * 0.02 / jnp.where(ommax > 0, ommax, 1.0), jnp.inf)
+        dt_free = jnp.minimum(jnp.minimum(engine.eta * tstar, dt_skin), dt_rot)
+        stop = _stopped(st) | (st.n_steps >= engine.max_steps)
+        reach = dt_free >= target - st.t
+        which = jnp.where(stop, 3, jnp.where(any_ev, 0, jnp.where(reach, 2, 1)))
+        st = eqx.tree_at(lambda s: (s.n_steps, s.flags), st,
+                         (st.n_steps + 1, st.flags | jnp.where(st.n_steps + 1 >= engine.max_steps, 4, 0)))
+
+        def out_at(s, o):
+            s = _agg_advance(engine, s, jnp.maximum(target - s.t, 0.0), Om)
+            s = eqx.tree_at(lambda z: z.t, s, target)
+            return s, _record(o, k, s)
+
+        st, outs = jax.lax.switch(which, [lambda s, o: (_agg_event(engine, s, s_ev, t_ev, x, r), o),
+                                          lambda s, o: (_agg_advance(engine, s, dt_free, Om), o),
+                                          out_at,
+                                          lambda s, o: (s, _record(o, k, s))], st, outs)
+        return st, k + jnp.where(which >= 2, 1, 0), outs
+
+    st, _, outs = jax.lax.while_loop(cond, body_fn, (st, jnp.int32(0), _empty_outputs(st, T)))
+    return st, outs
+
+
+@eqx.filter_jit
+def _advance_jit(engine, st, t_seg, nc_max):
+    if st.kind in _SPHERE_KINDS:
+        return _sphere_loop(engine, st, t_seg, nc_max)
+    return _agg_loop(engine, st, t_seg, nc_max)
+
+
+# ------------------------------------------------------------------------------------------------ result
+class BoxResult(AbstractResult):
+    """Result of a periodic-box run (R95 §3): per output time ``t`` (T,) the state of every slot.
+
+    Fields: ``t`` (T,) output times; ``status`` (:class:`jaxcoag.RESULTS`); ``outs`` dict of per-output
+    arrays: ``alive`` (T, n0), ``M`` aggregate mass, ``nmem`` member spheres, ``Rmax`` (R7), ``V`` (T, n0, 3)
+    COM velocity, ``ke_trans``/``ke_rot`` per aggregate, ``sph_agg``/``sph_r`` (T, n0) owner slot and
+    distance of each sphere centre from its aggregate's COM, the counters ``n_aggregates``, ``n_c``,
+    ``n_c1``, ``n_coag``, ``n_rest``, ``n_steps``, ``n_build``, ``flags``, ``status`` (T,);
+    ``final_state`` (:class:`BoxState`, holds the collision log); ``model`` ("i" ... "v").
+    Pass the result as ``initial`` to :func:`run` / :func:`jaxcoag.evolve` to continue the run.
+    """
+
+    t: jax.Array
+    status: RESULTS
+    outs: dict
+    final_state: BoxState
+    model: str = eqx.field(static=True)
+
+    # ---- R95 Fig. 3-5 quantities
+    @property
+    def n_aggregates(self):
+        """(T,) number N(t) of live aggregates, single spheres included (R95 §3)."""
+        return self.outs["n_aggregates"]
+
+    @property
+    def n_collisions(self):
+        """(T, 2) cumulative collisions N_C and first-time collisions N_C1 (a collision of a, b that repeats
+        the previous collision of a or of b with the same partner is not first-time; R95 Fig. 3a)."""
+        return jnp.stack([self.outs["n_c"], self.outs["n_c1"]], -1)
+
+    @property
+    def n_coagulations(self):
+        """(T,) cumulative coagulations."""
+        return self.outs["n_coag"]
+
+    @property
+    def n_restitutions(self):
+        """(T,) cumulative restitutions (bounces)."""
+        return self.outs["n_rest"]
+
+    @property
+    def m0(self):
+        return self.final_state.par["m0"]
+
+    @property
+    def max_mass(self):
+        """(T,) largest aggregate mass in units of m0 (R95 Fig. 3b)."""
+        return jnp.max(self.outs["M"], axis=-1) / self.m0
+
+    def mass_spectrum(self, kmax=None):
+        """(T, kmax) number n_k of aggregates of k member spheres, k = 1..kmax (R95 Fig. 3c,d; eq. 31)."""
+        n0 = self.outs["nmem"].shape[-1]
+        kmax = n0 if kmax is None else int(kmax)
+        k = jnp.where(self.outs["alive"], self.outs["nmem"], 0)
+        return jax.vmap(lambda kk: jnp.bincount(kk, length=kmax + 1)[1:])(jnp.minimum(k, kmax + 1) *
+                                                                          (k <= kmax))
+
+    def aggregates(self, i=-1):
+        """Per-aggregate properties at output i (numpy, live slots only): dict of ``slot``, ``n_a`` (members),
+        ``mass``, ``Rmax`` (R7), ``rho`` = M/((4/3)π R_max³), ``f_D`` and ``f_D_err`` (sorted-distance
+        regression, NaN for N_a < 3), ``ke`` (translational + rotational)."""
+        o = {k: np.asarray(v[i]) for k, v in self.outs.items() if np.ndim(v) >= 2}
+        fd, err = diag.fractal_dimension(o["sph_r"], o["sph_agg"], np.asarray(self.final_state.sph_R))
+        sl = np.nonzero(o["alive"])[0]
+        Rm = o["Rmax"][sl]
+        return dict(slot=sl, n_a=o["nmem"][sl], mass=o["M"][sl], Rmax=Rm,
+                    rho=diag.density(o["M"][sl], Rm), f_D=np.asarray(fd)[sl], f_D_err=np.asarray(err)[sl],
+                    ke=o["ke_trans"][sl] + o["ke_rot"][sl])
+
+    def fractal_dimension(self, i=-1):
+        """(f_D per live aggregate, its standard error, weighted mean f_D, its standard error) at output i (R95 §3)."""
+        ag = self.aggregates(i)
+        mean, err = diag.weighted_mean(ag["f_D"], ag["f_D_err"])
+        return ag["f_D"], ag["f_D_err"], mean, err
+
+    @property
+    def velocity_dispersion(self):
+        """(T, 3) number-weighted standard deviation of each COM velocity component over live aggregates."""
+        return jax.vmap(diag.velocity_dispersion)(self.outs["V"], self.outs["alive"])
+
+    @property
+    def kinetic_energy(self):
+        """(T, 2) total translational and rotational kinetic energy."""
+        return jnp.stack([jnp.sum(self.outs["ke_trans"], -1), jnp.sum(self.outs["ke_rot"], -1)], -1)
+
+    @property
+    def collision_log(self):
+        """The filled part of the collision log (numpy dict; see the module docstring)."""
+        st = self.final_state
+        n = int(st.n_log)
+        return {k: np.asarray(v[:n]) for k, v in st.log.items()}
+
+    # ---- common engine protocol (masses in the run's mass unit, volume L^3)
+    def bin_edges(self, edges=None):
+        if edges is not None:
+            return np.asarray(edges, np.float64)
+        n0 = self.outs["nmem"].shape[-1]
+        return (np.arange(n0 + 1) + 0.5) * float(self.m0)
+
+    def number_per_bin(self, edges=None):
+        e = jnp.asarray(self.bin_edges(edges))
+        V = self.final_state.par["L"] ** 3
+        M = jnp.where(self.outs["alive"], self.outs["M"], -1.0)
+        idx = jnp.searchsorted(e, M, side="right") - 1
+        ok = (idx >= 0) & (idx < e.shape[0] - 1)
+        return jax.vmap(lambda ii, kk: jnp.zeros(e.shape[0] - 1).at[ii].add(kk, mode="drop"))(
+            jnp.where(ok, idx, e.shape[0]), ok.astype(jnp.float64)) / V
+
+    def mass_per_bin(self, edges=None):
+        e = jnp.asarray(self.bin_edges(edges))
+        V = self.final_state.par["L"] ** 3
+        M = jnp.where(self.outs["alive"], self.outs["M"], -1.0)
+        idx = jnp.searchsorted(e, M, side="right") - 1
+        ok = (idx >= 0) & (idx < e.shape[0] - 1)
+        return jax.vmap(lambda ii, mm: jnp.zeros(e.shape[0] - 1).at[ii].add(mm, mode="drop"))(
+            jnp.where(ok, idx, e.shape[0]), jnp.where(ok, M, 0.0)) / V
+
+    def moments(self, p):
+        V = self.final_state.par["L"] ** 3
+        M = self.outs["M"]
+        al = self.outs["alive"]
+        return jnp.sum(jnp.where(al, jnp.where(al, M, 1.0) ** p, 0.0), axis=-1) / V
+
+    def to_xarray(self, *, attrs=None, kernel=None, edges=None):
+        """Dataset with coordinate ``t`` (and ``t_yr``), ``m``/``m_edge`` (mass bins of k m0), ``k`` (members),
+        ``slot`` and ``axis``: ``n_aggregates``, ``n_c``, ``n_c1``, ``n_coag``, ``n_rest``, ``max_mass`` [m0],
+        ``mass_spectrum`` (t, k), ``sigma_v`` (t, axis), ``ke_trans``, ``ke_rot`` (t), per-slot ``M``, ``nmem``,
+        ``Rmax``, ``alive`` (t, slot), plus the common ``mass_per_bin``, ``number_per_bin``, ``status``.
+        Units are the run's (R95: arbitrary length and time units)."""
+        from ..._dataset import common_dataset
+
+        e = self.bin_edges(edges)
+        mpb = np.asarray(self.mass_per_bin(edges))
+        total = np.asarray(self.moments(1))
+        n0 = self.outs["nmem"].shape[-1]
+        ke = np.asarray(self.kinetic_energy)
+        extra = {
+            "n_aggregates": (("t",), np.asarray(self.n_aggregates), {"units": "1", "long_name": "live aggregates N"}),
+            "n_c": (("t",), np.asarray(self.outs["n_c"]), {"units": "1", "long_name": "cumulative collisions N_C"}),
+            "n_c1": (("t",), np.asarray(self.outs["n_c1"]), {"units": "1", "long_name": "first-time collisions"}),
+            "n_coag": (("t",), np.asarray(self.outs["n_coag"]), {"units": "1", "long_name": "coagulations"}),
+            "n_rest": (("t",), np.asarray(self.outs["n_rest"]), {"units": "1", "long_name": "restitutions"}),
+            "max_mass": (("t",), np.asarray(self.max_mass), {"units": "m0", "long_name": "largest mass"}),
+            "mass_spectrum": (("t", "k"), np.asarray(self.mass_spectrum()), {"units": "1",
+                                                                             "long_name": "aggregates of k spheres"}),
+            "sigma_v": (("t", "axis"), np.asarray(self.velocity_dispersion), {"long_name": "velocity dispersion"}),
+            "ke_trans": (("t",), ke[:, 0], {"long_name": "translational kinetic energy"}),
+            "ke_rot": (("t",), ke[:, 1], {"long_name": "rotational kinetic energy"}),
+            "M": (("t", "slot"), np.asarray(self.outs["M"]), {"long_name": "aggregate mass (0: free slot)"}),
+            "nmem": (("t", "slot"), np.asarray(self.outs["nmem"]), {"long_name": "member spheres"}),
+            "Rmax": (("t", "slot"), np.asarray(self.outs["Rmax"]), {"long_name": "R_max (R95 eq. 7)"}),
+            "alive": (("t", "slot"), np.asarray(self.outs["alive"]), {"long_name": "slot in use"}),
+        }
+        ds = common_dataset(engine="rigid", title=f"jaxcoag rigid box, Richardson (1995) model ({self.model})",
+                            t=np.asarray(self.t), edges=e, mass_per_bin=mpb,
+                            number_per_bin=np.asarray(self.number_per_bin(edges)),
+                            gel_mass=np.zeros(len(self.t)), mass_drift=total / total[0] - 1.0,
+                            code=int(np.asarray(result_code(self.status))), extra=extra, attrs=attrs,
+                            extra_coords={"k": ("k", np.arange(1, n0 + 1)), "axis": ("axis", ["x", "y", "z"])})
+        ds.attrs["model"] = self.model
+        return ds
+
+
+def run(box, t_out, *, engine=None, checkpoint=None, every=1, resume=True, progress=False, max_segments=None,
+        throw=True):
+    """Run a periodic box (:func:`box_model`) to the output times ``t_out`` (R95 §3).
+
+    Arguments:
+        box: :class:`Box`, or a :class:`BoxResult` to continue.
+        t_out: 1-D increasing output times (>= 0, or >= the continued result's last time).
+        engine: :class:`RigidBox` (default ``RigidBox()``).
+        checkpoint, every, resume, progress, max_segments, throw: as for :func:`jaxcoag.evolve`.
+
+    Returns:
+        :class:`BoxResult`.
+
+    References: Richardson (1995) §3.
+    """
+    engine = RigidBox() if engine is None else engine
+    if not isinstance(engine, RigidBox):
+        raise JaxcoagInputError(f"engine must be a rigid.RigidBox(...); got {type(engine).__name__}.")
+    return evolve(None, engine, box, t_out, checkpoint=checkpoint, every=every, resume=resume, progress=progress,
+                  max_segments=max_segments, throw=throw)

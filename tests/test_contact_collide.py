@@ -1,0 +1,205 @@
+"""Aggregate collisions with the contact DEM: ``contact.collide`` and ``evolve(material, DEM(), Collision(...))``
+(Wada et al. 2007 §4-5; spec B11, B13.4, B13.7).
+
+Independent references: the head-on placement (closest pair 2 r1 + gap apart, centre-of-mass frame, E_imp =
+(1/2) mu v^2), conservation of momentum and angular momentum (exact for the leapfrog), the energy budget
+E_kin + U + sum E_dis (Fig. 6), planarity of 2-D data, numpy recomputations of the cluster analysis (eq. 50,
+n_con), and bit-identical checkpoint resumption.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcoag
+from jaxcoag._status import RESULTS
+from jaxcoag._validate import JaxcoagInputError
+from jaxcoag.aggregates import contact
+from jaxcoag.aggregates.contact import collision as C
+from jaxcoag.aggregates.contact import dem
+from jaxcoag.aggregates.contact.materials import ice, material
+
+MAT = ice()
+V0, TC, R1 = float(MAT.v0), float(MAT.t_c), float(MAT.r1)
+ECU = float(MAT.F_c * MAT.delta_c)
+V_IMP = 6.0 * V0
+T_END = 15_000 * 0.014 * TC  # the compression phase of the 8 + 8 collision (a quick run; the default end is slow)
+
+
+@pytest.fixture(scope="module")
+def pair8():
+    return contact.bcca(8, jax.random.key(0), dim=2, material=MAT), contact.bcca(8, jax.random.key(1), dim=2,
+                                                                               material=MAT)
+
+
+@pytest.fixture(scope="module")
+def run8(pair8):
+    a, b = pair8
+    return contact.collide(a, b, V_IMP, MAT, t_end=T_END)
+
+
+def test_placement_head_on_in_the_com_frame(pair8):
+    a, b = pair8
+    eng = C.DEM()
+    for bimp in (0.0, 1.5 * R1):
+        st = eng._init(MAT, C.Collision(a, b, V_IMP, impact_parameter=bimp), 0.0, None, None).dem
+        x, v = np.asarray(st.x), np.asarray(st.v)
+        xa, xb = x[:8], x[8:]
+        d = np.linalg.norm(xa[:, None] - xb[None], axis=-1)
+        assert d.min() == pytest.approx(2.05 * R1, rel=1e-12)  # closest pair: a 0.05 r1 gap
+        assert np.abs(x.mean(axis=0)).max() < 1e-12 * R1
+        assert (xb.mean(axis=0) - xa.mean(axis=0))[1] == pytest.approx(bimp, abs=1e-12 * R1)
+        assert xb[:, 0].mean() > xa[:, 0].mean()
+        np.testing.assert_allclose(v[:8, 0], V_IMP / 2, rtol=1e-15)
+        np.testing.assert_allclose(v[8:, 0], -V_IMP / 2, rtol=1e-15)
+        assert np.all(x[:, 2] == 0) and np.all(v[:, 1:] == 0)
+        # initial contacts: the 7 + 7 bonds of the two trees
+        assert int(jnp.sum(st.active)) == 14
+
+
+def test_collision_energy_budget_and_conservation(run8):
+    r = run8
+    assert r.status == RESULTS.successful
+    e_imp = 0.5 * float(MAT.m1) * (8 * 8 / 16) * V_IMP**2
+    assert float(r.E_imp) == pytest.approx(e_imp, rel=1e-14)
+    assert float(r.E_imp) / ECU == pytest.approx(16 / 8 * 6.0**2, rel=1e-12)  # (N/8)(v/v0)^2 (spec B11)
+    e = np.asarray(r.E_total)
+    assert np.max(np.abs(e - e[0])) / e_imp < 1e-4  # measured 3.4e-5 (run to the default end)
+    # every channel but twisting (planar) dissipates; the budget closes
+    assert float(r.E_dis_n[-1]) > 0 and float(r.E_dis_s[-1]) > 0 and float(r.E_dis_r[-1]) > 0
+    assert float(r.E_dis_t[-1]) == 0.0
+    np.testing.assert_allclose(r.E_total, r.E_kin + r.U + r.E_dis, rtol=1e-12, atol=1e-12 * e_imp)
+    # momentum stays zero, angular momentum stays at its initial value (zero impact parameter: 0)
+    p_scale = float(MAT.m1) * 16 * V_IMP / 2
+    assert float(jnp.max(jnp.abs(r.P))) < 1e-12 * p_scale
+    assert float(jnp.max(jnp.abs(r.L))) < 1e-12 * p_scale * 10 * R1
+    st = r.final_state.dem
+    assert int(r.n_steps) == int(st.step) == 15_000
+    assert float(r.t[-1]) == pytest.approx(T_END, rel=1e-12) and np.all(np.diff(np.asarray(r.t)) > 0)
+
+
+@pytest.mark.slow
+def test_default_end_of_a_collision(pair8):
+    """Default end (spec B11): t_contact + 4 (2 r_g,tot)/v_imp and >= 1e4 steps without contact events."""
+    a, b = pair8
+    r = contact.collide(a, b, 3.0 * V0, MAT)
+    assert r.status == RESULTS.successful
+    st = r.final_state.dem
+    t_stop = float(st.first_event) * float(r.dt) + 8 * float(r.final_state.r_g0) / (3.0 * V0)
+    assert float(r.t[-1]) >= t_stop and int(st.step) - int(st.last_event) >= 10_000
+    assert float(r.t[-1]) == pytest.approx(int(st.step) * float(r.dt), rel=1e-12)
+    e = np.asarray(r.E_total)
+    assert np.max(np.abs(e - e[0])) / float(r.E_imp) < 1e-4  # measured 1.7e-5 (158k steps)
+    assert float(r.E_dis_r[-1]) > 0.5 * float(r.E_imp)  # x_roll = 0.43: rolling takes most of the impact energy
+
+
+def test_planar_collision_stays_planar(run8):
+    st = run8.final_state.dem
+    assert float(jnp.max(jnp.abs(st.x[:, 2]))) <= 1e-12 * R1
+    assert float(jnp.max(jnp.abs(st.v[:, 2]))) <= 1e-12 * V0
+    assert float(jnp.max(jnp.abs(st.w[:, :2]))) <= 1e-12 * V0 / R1
+    assert float(jnp.max(jnp.abs(jnp.where(st.active[..., None], st.n_i, 0.0)[..., 2]))) <= 1e-12
+    assert float(jnp.max(jnp.abs(st.phi))) == 0.0  # omega || z is perpendicular to n_c: phi = 0
+
+
+def test_result_analysis_matches_numpy(run8):
+    r = run8
+    st = r.final_state.dem
+    N = 16
+    part, act = np.asarray(st.partner), np.asarray(st.active)
+    edges = [(i, int(part[i, k])) for i in range(N) for k in range(part.shape[1]) if act[i, k]]
+    # connected components by repeated relabelling (independent of the jitted pointer jumping)
+    lab = np.arange(N)
+    for _ in range(N):
+        for i, j in edges:
+            lab[i] = lab[j] = min(lab[i], lab[j])
+    sizes = sorted(np.bincount(lab, minlength=N)[np.unique(lab)], reverse=True)
+    assert list(np.asarray(r.cluster_sizes)[: len(sizes)]) == sizes and int(r.cluster_sizes.sum()) == N
+    big = np.asarray(r.labels) == 0
+    assert big.sum() == sizes[0] == int(r.N_large)
+    x = np.asarray(r.positions)[big]
+    assert float(r.r_g) == pytest.approx(np.sqrt(np.mean(np.sum((x - x.mean(0)) ** 2, -1))), rel=1e-12)
+    n_in = sum(1 for i, j in edges if big[i] and big[j])
+    assert float(r.n_contacts) == pytest.approx(n_in / sizes[0], rel=1e-14)
+    assert r.positions.shape == (16, 2) and r.velocities.shape == (16, 2)
+    ds = r.to_xarray()
+    assert set(ds.dims) >= {"t", "monomer", "xyz"} and list(ds["xyz"].values) == ["x", "y"]
+    np.testing.assert_allclose(ds["t_yr"].values, np.asarray(r.t) / jaxcoag.constants.yr, rtol=1e-15)
+    assert ds["E_total"].attrs["units"] == "erg" and ds["positions"].attrs["units"] == "cm"
+    assert float(ds["r_g"]) == float(r.r_g) and ds.attrs["engine"] == "dem"
+
+
+def test_evolve_checkpoint_resume_is_bit_identical(pair8, tmp_path):
+    a, b = pair8
+    coll = C.Collision(a, b, V_IMP)
+    dt = 0.014 * TC
+    t_out = dt * 100 * np.arange(1, 51)
+    full = jaxcoag.evolve(MAT, C.DEM(), coll, t_out, checkpoint=tmp_path / "full.npz", every=25)
+    part = jaxcoag.evolve(MAT, C.DEM(), coll, t_out, checkpoint=tmp_path / "ck.npz", every=25, max_segments=1)
+    assert part.t.shape == (25,)
+    res = jaxcoag.evolve(MAT, C.DEM(), coll, t_out, checkpoint=tmp_path / "ck.npz", every=25)
+    assert res.t.shape == (50,) and int(res.n_steps) == 5000
+    for name in ("E_total", "E_kin", "U", "E_dis_n", "positions", "velocities", "omega"):
+        assert np.array_equal(np.asarray(getattr(res, name)), np.asarray(getattr(full, name))), name
+
+
+# ---------------------------------------------------------------------------------------- bad input
+def test_bad_inputs_are_refused_before_any_work(pair8):
+    a, b = pair8
+    m2, m3 = contact.monomer(2), contact.monomer(3)
+    with pytest.raises(JaxcoagInputError, match="overlap"):
+        contact.collide(contact.Aggregate(jnp.array([[0.0, 0.0], [1.5 * R1, 0.0]]), R1), b, V_IMP, MAT)
+    with pytest.raises(JaxcoagInputError, match="stability limit"):
+        contact.collide(a, b, V_IMP, MAT, dt=0.3 * TC)
+    for v in (0.0, -1.0, float("nan")):
+        with pytest.raises(JaxcoagInputError, match="v_imp"):
+            contact.collide(a, b, v, MAT)
+    with pytest.raises(JaxcoagInputError, match="dimensions"):
+        contact.collide(m2, m3, V_IMP, MAT)
+    with pytest.raises(JaxcoagInputError, match="r1"):
+        contact.collide(contact.monomer(2, r1=2e-5), contact.monomer(2, r1=2e-5), V_IMP, MAT)
+    with pytest.raises(JaxcoagInputError, match="gamma"):
+        material(-100.0, 7e10, 0.25, 1.0)
+    with pytest.raises(JaxcoagInputError, match="capacity"):
+        contact.collide(a, b, V_IMP, MAT, capacity=1)  # a BCCA monomer owns 2+ of its bonds
+    with pytest.raises(JaxcoagInputError, match="contact.Material"):
+        jaxcoag.evolve(jaxcoag.kernels.Constant(1.0), C.DEM(), C.Collision(a, b, V_IMP), [1e-9])
+    with pytest.raises(JaxcoagInputError, match="capacity"):
+        C.DEM(capacity=0)
+
+
+def test_flags_map_to_the_shared_status_codes():
+    codes = np.asarray(dem.flags_code(jnp.array([0, dem.FLAG_CONTACTS, dem.FLAG_NEIGHBOURS, dem.FLAG_NONFINITE,
+                                                 dem.FLAG_CONTACTS | dem.FLAG_NONFINITE])))
+    names = jaxcoag.RESULT_NAMES
+    assert [names[c] for c in codes] == ["successful", "capacity_exceeded", "capacity_exceeded", "nonfinite",
+                                         "capacity_exceeded"]
+
+
+@pytest.mark.slow
+def test_capacity_overflow_during_the_run_is_a_status():
+    """Monomer 0 owns its bond to 1 (capacity 1); the incoming monomer 2 hits monomer 0: no slot is left."""
+    d = 2 * R1 - float(MAT.delta0)
+    a = contact.Aggregate(jnp.array([[0.0, 0.0], [-d, 0.0]]), R1)  # monomer 0 in front (+x)
+    b = contact.monomer(2)
+    with pytest.warns(RuntimeWarning, match="capacity_exceeded"):
+        r = contact.collide(a, b, 2.5 * V0, MAT, capacity=1, t_end=200 * TC, throw=False)
+    assert r.status == RESULTS.capacity_exceeded
+    assert int(r.final_state.dem.flags) & dem.FLAG_CONTACTS
+    assert int(r.n_steps) < 200 / 0.014  # the run stopped at the overflow
+    with pytest.raises(JaxcoagInputError, match="capacity"):
+        contact.collide(a, b, 2.5 * V0, MAT, capacity=1, t_end=200 * TC)
+
+
+def test_key_rotates_each_aggregate_rigidly_about_its_centre(pair8):
+    a, b = pair8
+    ra, rb = C._random_rotations(a, b, jax.random.key(7))
+    ra2, _ = C._random_rotations(a, b, jax.random.key(7))
+    for agg, rot in ((a, ra), (b, rb)):
+        x, y = np.asarray(agg.positions), np.asarray(rot.positions)
+        d = lambda p: np.linalg.norm(p[:, None] - p[None], axis=-1)  # noqa: E731
+        np.testing.assert_allclose(d(y), d(x), rtol=1e-12, atol=1e-12 * R1)
+        np.testing.assert_allclose(y.mean(0), x.mean(0), atol=1e-12 * R1)
+        assert np.abs(y - x).max() > 0.1 * R1  # a proper rotation, not the identity
+    assert np.array_equal(np.asarray(ra.positions), np.asarray(ra2.positions))  # a function of the key

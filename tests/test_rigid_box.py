@@ -1,0 +1,277 @@
+"""Periodic box of spheres / rigid aggregates (Richardson 1995 §3, Table I; jaxcoag.aggregates.rigid.box).
+
+Default run (no compilation of the engine, < 2 s): bad inputs, the initial conditions of box_model
+(exact speeds, zero momentum, no overlap) and the A9 diagnostics against independent formulas
+(scipy.stats.linregress, R32). The engine itself compiles for tens of seconds on 2 CPU cores, so every
+test that runs it is marked ``slow``:
+
+* model (i), N0 = 300, seeds 1, 2, 3 (all of them, none picked): mean N(t) within 3 sigma_3 + 1 % of (R30),
+  sigma_3 from the Marcus-Lushnikov table of the spec (2000 realisations, N0 = 1000) scaled by
+  sqrt(1000 / 300); N + N_C = N0 exactly; N_C == N_C1; the pooled mass spectrum against (R31) by chi^2;
+* model (ii): per-collision |dP| <= 1e-12 P_scale, total momentum drift, dKE <= 0;
+* model (iv): per-collision |dP| <= 1e-12 P_scale, |dL| <= 1e-10 L_scale, dKE <= 1e-12 KE, both outcomes;
+* fuzz at high speed: no two spheres of different aggregates overlap by more than the tolerance at any
+  output of a segmented run (conservative advancement cannot tunnel);
+* checkpoint / resume equals the uninterrupted run; to_xarray carries the same numbers.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from jaxcoag import analytic
+from jaxcoag._validate import JaxcoagInputError
+from jaxcoag.aggregates import rigid
+from jaxcoag.aggregates.rigid import diagnostics as diag
+
+KEY = jax.random.key(7)
+
+
+# ------------------------------------------------------------------------------------------------ bad input
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(model="vi"), "unknown model"),
+    (dict(model="i", n0=1000, r0=0.5), "too small"),
+    (dict(model="iv", eps_n=1.2), "eps_n"),
+    (dict(model="iv", eps_n=-0.1), "eps_n"),
+    (dict(model="iv", mu_t=2.0), "mu_t"),
+    (dict(model="iv", mu_p=-0.5), "mu_p"),
+    (dict(model="i", v0=-1.0), "v0"),
+    (dict(model="i", n0=1), "n0"),
+])
+def test_bad_inputs(kwargs, match):
+    model = kwargs.pop("model")
+    with pytest.raises(JaxcoagInputError, match=match):
+        rigid.box_model(model, key=KEY, **kwargs)
+
+
+def test_overlapping_given_spheres_refused():
+    x = np.array([[1.0, 1.0, 1.0], [1.15, 1.0, 1.0], [5.0, 5.0, 5.0]])  # 0.15 < 2 r0
+    with pytest.raises(JaxcoagInputError, match="overlap"):
+        rigid.box_model("i", n0=3, positions=x, key=KEY)
+    x[0] = [0.05, 1.0, 1.0]
+    x[1] = [9.95, 1.0, 1.0]  # 0.1 apart through the periodic face (minimum image)
+    with pytest.raises(JaxcoagInputError, match="overlap"):
+        rigid.box_model("i", n0=3, positions=x, key=KEY)
+
+
+def test_engine_refuses_kernel_and_bad_settings():
+    box = rigid.box_model("i", n0=8, key=KEY)
+    with pytest.raises(JaxcoagInputError, match="kernel=None"):
+        rigid.box.RigidBox()._check(object(), box, jnp.ones(1), 0.0, None, None)
+    with pytest.raises(JaxcoagInputError, match="eta"):
+        rigid.box.RigidBox(eta=1.5)
+    with pytest.raises(JaxcoagInputError, match="neighbors"):
+        rigid.box.RigidBox(neighbors=0)
+
+
+# ------------------------------------------------------------------------------------------------ initial state
+def test_box_model_initial_conditions():
+    b = rigid.box_model("i", n0=400, v0=3.0, key=KEY)
+    v = np.asarray(b.v)
+    np.testing.assert_allclose(np.linalg.norm(v, axis=1), 3.0, rtol=1e-14)  # constant speed (model i)
+    assert np.max(np.abs(v.sum(axis=0))) < 1e-12  # antithetic pairs: zero net momentum
+    x = np.asarray(b.x)
+    assert np.all((x >= 0) & (x < 10.0))
+    d = x[:, None, :] - x[None, :, :]
+    d -= 10.0 * np.round(d / 10.0)
+    r = np.sqrt((d**2).sum(-1)) + np.eye(400) * 100
+    assert r.min() > 0.2  # no overlapping or touching pair (minimum image)
+    # alpha = pi (2R)^2 (4/3) v0 / L^3 (R95 §3) = 1.6755e-4 v0
+    assert b.alpha == pytest.approx(1.6755160819145563e-4 * 3.0, rel=1e-12)
+    m = rigid.box_model("iv", n0=600, v0=2.0, key=KEY)
+    vm = np.asarray(m.v)
+    assert np.max(np.abs(vm.sum(axis=0))) < 1e-11
+    # Maxwellian with rms speed v0: <v^2> = v0^2 within 4 sigma (Var(v^2)/<v^2>^2 = 2/3)
+    assert abs(np.mean((vm**2).sum(1)) / 4.0 - 1) < 4 * math.sqrt(2 / 3 / 600)
+    assert float(m.e_thr) == pytest.approx(0.5 * np.mean((vm**2).sum(1)), rel=1e-12)  # E_thr = mean KE
+
+
+# ------------------------------------------------------------------------------------------------ diagnostics (A9)
+def test_fractal_dimension_matches_linregress():
+    rng = np.random.default_rng(3)
+    sizes = [3, 5, 17, 60]
+    agg = np.concatenate([np.full(s, i) for i, s in enumerate(sizes)])
+    r = rng.uniform(0.05, 3.0, agg.size)
+    R = np.full(agg.size, 0.1)
+    fd, err = diag.fractal_dimension(r, agg, R)
+    for i, s in enumerate(sizes):
+        rr = np.sort(r[agg == i] + 0.1)
+        lr = stats.linregress(np.log(rr), np.log(np.arange(1, s + 1)))
+        assert fd[i] == pytest.approx(lr.slope, rel=1e-12)
+        assert err[i] == pytest.approx(lr.stderr, rel=1e-10)
+    assert np.all(np.isnan(fd[len(sizes):]))  # slots without members
+
+
+def test_fractal_dimension_exact_power_law_and_small_aggregates():
+    k = np.arange(1, 41)
+    r = 0.3 * k ** (1 / 1.8)  # N(<r) = (r / 0.3)^1.8 exactly
+    fd, err = diag.fractal_dimension(r, np.zeros(40, int), np.zeros(40), include_radius=False)
+    assert fd[0] == pytest.approx(1.8, rel=1e-12) and err[0] < 1e-12
+    fd2, _ = diag.fractal_dimension(np.array([0.1, 0.2, 0.3, 0.4]), np.array([0, 0, 1, 1]), np.full(4, 0.1))
+    assert np.all(np.isnan(fd2))  # N_a = 2 is not fitted
+
+
+def test_weighted_mean_density_power_law_gamma():
+    m, e = diag.weighted_mean([1.0, 2.0, np.nan], [1.0, 2.0, 1.0])
+    assert m == pytest.approx((1 + 2 / 4) / (1 + 1 / 4), rel=1e-15)
+    assert e == pytest.approx(1 / math.sqrt(1.25), rel=1e-15)
+    assert diag.density(3.0, 2.0) == pytest.approx(3.0 / (4 / 3 * math.pi * 8), rel=1e-15)
+    # R32: gamma = -0.71 gives f_D = 3 / 1.71 = 1.754 (R95 model iii: 1.75)
+    assert diag.fd_from_gamma(-0.71) == pytest.approx(1.7543859649122806, rel=1e-15)
+    rng = np.random.default_rng(1)
+    n = rng.integers(1, 200, 300)
+    y = 0.1 * n**0.57 * np.exp(rng.normal(0, 0.05, 300))
+    s, se, c = diag.power_law(n, y)
+    lr = stats.linregress(np.log(n[n >= 2]), np.log(y[n >= 2]))
+    assert s == pytest.approx(lr.slope, rel=1e-12) and se == pytest.approx(lr.stderr, rel=1e-10)
+    assert c == pytest.approx(lr.intercept, rel=1e-12)
+    rm = diag.r_max(np.array([0.0, 0.5, 0.2, 0.0]), np.array([0, 0, 0, 3]), np.full(4, 0.1))
+    np.testing.assert_allclose(rm, [0.6, 0.0, 0.0, 0.1], rtol=1e-15)
+    V = jnp.array([[1.0, 0, 0], [-1.0, 2, 0], [100.0, 0, 0]])
+    np.testing.assert_allclose(diag.velocity_dispersion(V, jnp.array([True, True, False])), [1.0, 1.0, 0.0])
+
+
+# ------------------------------------------------------------------------------------------------ engine (slow)
+def _tau_times(b, taus):
+    return np.asarray(taus) / (0.5 * b.alpha * b.n0)
+
+
+# sigma/N_th of the mean of 3 runs at N0 = 1000 (spec A9, 2000 Marcus-Lushnikov realisations)
+_ML_TAU = np.array([0.25, 0.5, 1.0, 2.0, 4.0, 9.0])
+_ML_SIG = np.array([0.008, 0.011, 0.014, 0.018, 0.024, 0.033])
+
+
+@pytest.fixture(scope="module")
+def model_i_runs():
+    taus = np.array([0.25, 0.5, 1.0, 2.0, 4.0])
+    runs = []
+    for seed in (1, 2, 3):
+        b = rigid.box_model("i", n0=300, v0=13.0, key=jax.random.key(seed))
+        runs.append(rigid.run(b, _tau_times(b, taus)))
+    return taus, runs
+
+
+@pytest.mark.slow
+def test_model_i_constant_kernel_statistics(model_i_runs):
+    taus, runs = model_i_runs
+    n0 = 300
+    N = np.array([np.asarray(r.n_aggregates) for r in runs], float)
+    for r in runs:
+        nc = np.asarray(r.n_collisions)
+        np.testing.assert_array_equal(np.asarray(r.n_aggregates) + nc[:, 0], n0)  # N + N_C = N0 exactly
+        np.testing.assert_array_equal(nc[:, 0], nc[:, 1])  # N_C == N_C1 under coagulation only
+        assert str(r.status) == str(rigid.box.RESULTS.successful)
+    Nth = n0 / (1 + taus)  # (R30)
+    sig3 = np.interp(taus, _ML_TAU, _ML_SIG) * math.sqrt(1000 / n0) * Nth
+    dev = np.abs(N.mean(0) - Nth)
+    assert np.all(dev <= 3 * sig3 + 0.01 * Nth), (N.mean(0), Nth, sig3)
+    # (R31) pooled spectrum at tau = 1 (f = 0.5) and tau = 4 (f = 0.2): chi^2 over k = 1..8 + tail, p > 1e-3
+    for i in (2, 4):
+        obs = sum(np.asarray(r.mass_spectrum(kmax=n0))[i] for r in runs).astype(float)
+        f = N[:, i].sum() / (3 * n0)
+        k = np.arange(1, n0 + 1)
+        exp = 3 * n0 * f**2 * (1 - f) ** (k - 1)
+        o = np.concatenate([obs[:8], [obs[8:].sum()]])
+        e = np.concatenate([exp[:8], [exp[8:].sum()]])
+        while e[-1] < 5:  # pool the sparse tail
+            o, e = np.concatenate([o[:-2], [o[-2:].sum()]]), np.concatenate([e[:-2], [e[-2:].sum()]])
+        e *= o.sum() / e.sum()
+        chi2 = np.sum((o - e) ** 2 / e)
+        assert stats.chi2.sf(chi2, len(o) - 2) > 1e-3, (i, o, e)
+        # (R31) is jaxcoag.analytic's constant-kernel solution with coeff = alpha, n0 = N0
+        b = rigid.box_model("i", n0=n0, v0=13.0, key=jax.random.key(1))
+        t = taus[i] / (0.5 * b.alpha * n0)
+        ref = np.exp(analytic.log_nk("constant", np.arange(1, 9), t, coeff=b.alpha, n0=n0))
+        np.testing.assert_allclose(ref, n0 / (1 + taus[i]) ** 2 * (taus[i] / (1 + taus[i])) ** np.arange(8),
+                                   rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_model_i_xarray_and_max_mass(model_i_runs):
+    taus, runs = model_i_runs
+    r = runs[0]
+    ds = r.to_xarray()
+    np.testing.assert_array_equal(ds["n_aggregates"].values, np.asarray(r.n_aggregates))
+    np.testing.assert_allclose(ds["t"].values, np.asarray(r.t))
+    spec = ds["mass_spectrum"].values
+    np.testing.assert_array_equal((spec * ds["k"].values[None, :]).sum(1), 300)  # mass conserved
+    np.testing.assert_array_equal(spec.sum(1), np.asarray(r.n_aggregates))
+    assert np.all(np.diff(np.asarray(r.max_mass)) >= 0)
+    np.testing.assert_allclose(np.asarray(r.moments(1)), 300 / 1000.0, rtol=1e-13)  # total mass / L^3
+
+
+@pytest.mark.slow
+def test_model_ii_momentum_per_collision():
+    b = rigid.box_model("ii", n0=200, box=6.0, v0=5.0, key=jax.random.key(11))
+    r = rigid.run(b, jnp.array([1.0, 3.0]))
+    log = r.collision_log
+    assert len(log["t"]) == int(r.n_collisions[-1, 0]) > 30
+    assert np.all(log["dP"] <= 1e-12 * log["P_scale"])
+    assert np.all(log["dKE"] <= 1e-12 * log["KE"])  # perfectly inelastic merges lose energy
+    st = r.final_state
+    P = np.sum(np.asarray(st.M)[:, None] * np.asarray(st.V) * np.asarray(st.alive)[:, None], axis=0)
+    assert np.max(np.abs(P)) <= 1e-12 * float(np.sum(np.asarray(b.mass) * np.linalg.norm(np.asarray(b.v), axis=1)))
+    # model (ii) radii grow as r0 (m/m0)^(1/3)
+    al = np.asarray(st.alive)
+    np.testing.assert_allclose(np.asarray(st.sph_R)[al], 0.1 * np.cbrt(np.asarray(st.M)[al]), rtol=1e-13)
+
+
+@pytest.mark.slow
+def test_model_iv_per_collision_invariants():
+    b = rigid.box_model("iv", n0=120, box=5.0, v0=5.0, key=jax.random.key(5))
+    r = rigid.run(b, jnp.array([0.5, 1.5]))
+    log = r.collision_log
+    assert len(log["t"]) > 40
+    assert {1, 2} <= set(log["outcome"].tolist())  # both coagulation and restitution occur
+    assert np.all(log["dP"] <= 1e-12 * log["P_scale"])
+    assert np.all(log["dL"] <= 1e-10 * log["L_scale"])
+    assert np.all(log["dKE"] <= 1e-12 * log["KE"])
+    # outcome rule (A8): coagulation iff E_imp < E_thr
+    np.testing.assert_array_equal(log["outcome"] == 1, log["e_imp"] < float(b.e_thr))
+    o = r.outs
+    np.testing.assert_array_equal(np.asarray(o["n_aggregates"]) + np.asarray(o["n_coag"]), 120)
+    assert np.all(np.asarray(o["n_c1"]) <= np.asarray(o["n_c"]))
+    assert np.all(np.asarray(o["n_c"]) == np.asarray(o["n_coag"]) + np.asarray(o["n_rest"]))
+
+
+def _min_gap(st):
+    """Smallest gap between spheres of different aggregates (all pairs, minimum image)."""
+    from jaxcoag.aggregates.rigid.box import _mimg, _sphere_pos
+
+    x, _, _ = _sphere_pos(st)
+    L = st.par["L"]
+    d = _mimg(x[:, None, :] - x[None, :, :], L)
+    g = jnp.sqrt(jnp.sum(d * d, -1)) - (st.sph_R[:, None] + st.sph_R[None, :])
+    other = st.sph_agg[:, None] != st.sph_agg[None, :]
+    return float(jnp.min(jnp.where(other, g, jnp.inf)))
+
+
+@pytest.mark.slow
+def test_fuzz_no_tunnelling_at_high_speed():
+    """v0 = 200 box units per time: a sphere crosses its own diameter in 1e-3, the outputs are 5e-3 apart."""
+    b = rigid.box_model("iii", n0=60, box=3.0, v0=200.0, key=jax.random.key(2))
+    eng = rigid.box.RigidBox()
+    res = b
+    gaps = []
+    for k in range(1, 13):
+        res = rigid.run(res, jnp.array([5e-3 * k]), engine=eng)
+        gaps.append(_min_gap(res.final_state))
+    assert int(res.n_collisions[-1, 0]) > 10
+    assert min(gaps) >= -1e-6 * 0.1 - 1e-12, gaps
+
+
+@pytest.mark.slow
+def test_checkpoint_resume_equals_uninterrupted(tmp_path):
+    b = rigid.box_model("i", n0=100, box=6.0, v0=13.0, key=jax.random.key(4))
+    t = jnp.array([0.2, 0.4, 0.6])
+    full = rigid.run(b, t)
+    ck = tmp_path / "box.npz"
+    part = rigid.run(b, t, checkpoint=ck, max_segments=1)
+    assert len(part.t) == 1
+    res = rigid.run(b, t, checkpoint=ck)
+    np.testing.assert_array_equal(np.asarray(res.n_aggregates), np.asarray(full.n_aggregates))
+    np.testing.assert_array_equal(np.asarray(res.outs["M"]), np.asarray(full.outs["M"]))
