@@ -4,22 +4,13 @@ Each script's ``main(["--quick", "--out", tmp])`` returns its check points; all 
 exist, and the key numbers are asserted here against the paper's law N = 1.37 (r_g/r1)^1.57.
 """
 
-import pathlib
-
-from _scripts import ROOT, load_script  # noqa: E402  (shared script loader)
+from _scripts import ROOT, run_quick_figure  # noqa: E402  (shared script loader)
 
 FIGS = ROOT / "paper_figs"
 
 
 def _run(name, tmp_path):
-    res = load_script(FIGS / f"{name}.py", "_paper_fig_").main(["--quick", "--out", str(tmp_path)])
-    png = pathlib.Path(res["png"])
-    assert png.exists() and png.stat().st_size > 10_000
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    bad = {k: v for k, v in res["checks"].items() if v["counts"] and not v["ok"]}
-    assert not bad, bad
-    assert res["all_ok"]
-    return res
+    return run_quick_figure(FIGS / f"{name}.py", tmp_path)
 
 
 def test_figW04_bcca_gallery(tmp_path):

@@ -4,11 +4,10 @@ Each script's ``main(["--quick", "--out", tmp])`` returns its check points (comp
 the analytic hysteresis loop); all must pass and the PNG must exist.
 """
 
-import pathlib
 
 import pytest
 
-from _scripts import ROOT, load_script  # noqa: E402  (shared script loader)
+from _scripts import ROOT, run_quick_figure  # noqa: E402  (shared script loader)
 
 FIGS = ROOT / "paper_figs"
 
@@ -24,13 +23,7 @@ EXPECTED = {
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))
 def test_quick_figure(name, tmp_path):
-    res = load_script(FIGS / f"{name}.py", "_paper_fig_").main(["--quick", "--out", str(tmp_path)])
-    png = pathlib.Path(res["png"])
-    assert png.exists() and png.stat().st_size > 10_000
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    bad = {k: v for k, v in res["checks"].items() if v["counts"] and not v["ok"]}
-    assert not bad, bad
-    assert res["all_ok"]
+    res = run_quick_figure(FIGS / f"{name}.py", tmp_path)
     for key, ref in EXPECTED[name].items():
         row = res["checks"][key]
         assert row["reference"] == pytest.approx(ref, rel=1e-15)

@@ -60,8 +60,9 @@ class Aggregate(eqx.Module):
     @property
     def r_g(self) -> jax.Array:
         """Gyration radius [cm], r_g = sqrt(<|x_i - x_M|^2>) (Wada et al. 2007 eq. 50)."""
-        x = jnp.asarray(self.positions)
-        return jnp.sqrt(jnp.mean(jnp.sum((x - jnp.mean(x, axis=0, keepdims=True)) ** 2, axis=-1)))
+        from .analysis import gyration_radius
+
+        return gyration_radius(self.positions)
 
 
 def monomer(dim: int = 3, r1: float = 1e-5) -> Aggregate:

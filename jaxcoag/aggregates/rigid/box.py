@@ -977,23 +977,22 @@ class BoxResult(AbstractResult):
         n0 = self.outs["nmem"].shape[-1]
         return (np.arange(n0 + 1) + 0.5) * float(self.m0)
 
-    def number_per_bin(self, edges=None):
+    def _per_bin(self, edges, mass_weighted):
+        """Aggregates (or their mass) per box volume in the mass bins ``edges``, at every output."""
         e = jnp.asarray(self.bin_edges(edges))
         V = self.final_state.par["L"] ** 3
         M = jnp.where(self.outs["alive"], self.outs["M"], -1.0)
         idx = jnp.searchsorted(e, M, side="right") - 1
         ok = (idx >= 0) & (idx < e.shape[0] - 1)
-        return jax.vmap(lambda ii, kk: jnp.zeros(e.shape[0] - 1).at[ii].add(kk, mode="drop"))(
-            jnp.where(ok, idx, e.shape[0]), ok.astype(jnp.float64)) / V
+        w = jnp.where(ok, M, 0.0) if mass_weighted else ok.astype(jnp.float64)
+        return jax.vmap(lambda ii, ww: jnp.zeros(e.shape[0] - 1).at[ii].add(ww, mode="drop"))(
+            jnp.where(ok, idx, e.shape[0]), w) / V
+
+    def number_per_bin(self, edges=None):
+        return self._per_bin(edges, False)
 
     def mass_per_bin(self, edges=None):
-        e = jnp.asarray(self.bin_edges(edges))
-        V = self.final_state.par["L"] ** 3
-        M = jnp.where(self.outs["alive"], self.outs["M"], -1.0)
-        idx = jnp.searchsorted(e, M, side="right") - 1
-        ok = (idx >= 0) & (idx < e.shape[0] - 1)
-        return jax.vmap(lambda ii, mm: jnp.zeros(e.shape[0] - 1).at[ii].add(mm, mode="drop"))(
-            jnp.where(ok, idx, e.shape[0]), jnp.where(ok, M, 0.0)) / V
+        return self._per_bin(edges, True)
 
     def moments(self, p):
         V = self.final_state.par["L"] ** 3
