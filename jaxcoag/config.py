@@ -115,7 +115,7 @@ PosInt = Annotated[int, Field(gt=0)]
 NonNegInt = Annotated[int, Field(ge=0)]
 
 EFFECT_NAMES = ("brownian", "turbulence_oc07", "radial_drift", "azimuthal_drift", "settling")
-ENGINES = ("binned", "mc", "contact", "rigid")
+ENGINES = ("binned", "mc", "contact", "rigid", "disk")
 #: engines of dust populations (they read [scene], [gas], [dust], [grid], [time]); the particle-level engines
 #: "contact" and "rigid" read their own section ([contact] / [rigid]) only
 COAGULATION_ENGINES = ("binned", "mc")
@@ -131,7 +131,7 @@ class _Section(BaseModel):
 class RunSection(_Section):
     name: str = "run"
     description: str = ""
-    engine: Literal["binned", "mc", "contact", "rigid"] = "binned"
+    engine: Literal["binned", "mc", "contact", "rigid", "disk"] = "binned"
 
 
 class SceneSection(_Section):
@@ -368,6 +368,53 @@ class RigidSection(_Section):
     n_out: PosInt = 20
 
 
+class DiskSection(_Section):
+    """[disk]: the 1-D radial disk (DustPy's default model unless overridden; Stammler & Birnstiel 2022).
+
+    Keys mirror :func:`jaxcoag.disk.dustpy_default` (lengths in au, masses of the disk/star in solar
+    masses here; cgs everywhere else). Output times come from [time] (default: DustPy's snapshots)."""
+
+    nr: PosInt = 100
+    r_min_au: Pos = 1.0
+    r_max_au: Pos = 1000.0
+    m_min: Pos = 1e-12
+    m_max: Pos = 1e5
+    bins_per_decade: PosInt = 7
+    alpha: Pos = 1e-3
+    delta_rad: Optional[Pos] = None
+    delta_turb: Optional[Pos] = None
+    delta_vert: Optional[Pos] = None
+    v_frag: Pos = 100.0
+    m_disk_msun: Pos = 0.05
+    r_c_au: Pos = 60.0
+    rho_s: Pos = 1.67
+    dust_to_gas: Pos = 0.01
+    a_ini_max: Pos = 1e-4
+    m_star_msun: Pos = 1.0
+    r_star_rsun: Pos = 2.0
+    t_star: Pos = 5772.0
+    stokes: Literal["dustpy", "jaxcoag"] = "dustpy"
+    coagulation: bool = True
+    dust_transport: bool = True
+    gas_evolution: bool = True
+    mode: Literal["parity", "split"] = "parity"
+    cfl: Pos = 0.1
+    max_steps: PosInt = 100_000
+
+    @model_validator(mode="after")
+    def _check(self):
+        if not self.r_max_au > self.r_min_au:
+            raise ValueError(f"[disk] r_max_au = {self.r_max_au!r} must exceed r_min_au = {self.r_min_au!r}.")
+        if self.nr < 5:
+            raise ValueError(f"[disk] nr = {self.nr!r}: the radial grid needs at least 5 cells (DustPy's boundary "
+                             "rows use three cells at each end).")
+        if not self.m_max > self.m_min:
+            raise ValueError(f"[disk] m_max = {self.m_max!r} g must exceed m_min = {self.m_min!r} g.")
+        if self.cfl > 1:
+            raise ValueError(f"[disk] cfl = {self.cfl!r} must be <= 1 (DustPy uses 0.1).")
+        return self
+
+
 class TimeSection(_Section):
     t_end_yr: Optional[Pos] = None
     n_out: PosInt = 12
@@ -417,6 +464,7 @@ class _Schema(BaseModel):
     mc: MCSection = MCSection()
     contact: Optional[ContactSection] = None
     rigid: Optional[RigidSection] = None
+    disk: Optional[DiskSection] = None
     time: Optional[TimeSection] = None
     output: OutputSection = OutputSection()
 
@@ -600,8 +648,10 @@ class RunConfig:
         """sha256 of everything that determines the solution: the engine and the sections it reads
         (all but [run], [output] and the other engine's [solver] / [mc])."""
         if self.engine in COAGULATION_ENGINES:
-            skip = ("run", "output", "contact", "rigid", "mc" if self.engine == "binned" else "solver")
+            skip = ("run", "output", "contact", "rigid", "disk", "mc" if self.engine == "binned" else "solver")
             d = {k: v for k, v in self.data.items() if k not in skip}
+        elif self.engine == "disk":
+            d = {"disk": self.data["disk"], "time": self.data["time"]}
         else:
             d = {self.engine: self.data[self.engine]}
         d["engine"] = self.engine
@@ -638,6 +688,15 @@ def _resolve(m: _Schema) -> dict:
         data["contact"] = ContactSection().model_dump()
     if engine == "rigid" and data["rigid"] is None:
         data["rigid"] = RigidSection().model_dump()
+    if engine == "disk" and data["disk"] is None:
+        data["disk"] = DiskSection().model_dump()
+    if engine == "disk" and data["time"] is None:  # DustPy's snapshots: 1e3 to 1e5 yr, 21 log-spaced
+        data["time"] = TimeSection(t_out_yr=[float(x) for x in np.geomspace(1e3, 1e5, 21)]).model_dump()
+    dk = data["disk"]
+    if dk is not None:
+        for k in ("delta_rad", "delta_turb", "delta_vert"):
+            if dk[k] is None:
+                dk[k] = dk["alpha"]
     ct = data["contact"]
     if ct is not None and ct["v_imp"] is None and ct["v_imp_v0"] is None:
         ct["v_imp_v0"] = CONTACT_DEFAULT_V_IMP_V0
@@ -721,7 +780,7 @@ def load(path) -> RunConfig:
 
 
 _DEFAULT_FILES = {"binned": "default_run.toml", "mc": "default_mc_run.toml", "contact": "default_contact_run.toml",
-                  "rigid": "default_rigid_run.toml"}
+                  "rigid": "default_rigid_run.toml", "disk": "default_disk_run.toml"}
 
 
 def default_path(engine: str = "binned") -> str:

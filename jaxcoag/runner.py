@@ -70,6 +70,10 @@ def quick_config(cfg: cfgmod.RunConfig) -> cfgmod.RunConfig:
     decade (m_min recomputed so the monomer sits at a bin centre), at most 8 outputs, and rtol >=
     1e-4 (binned) or [mc] ns_target <= 200 (Ns* / Ng*, Monte Carlo); the physics and the time span
     are unchanged."""
+    if cfg.engine == "disk":
+        from .disk.runs import quick_disk
+
+        return quick_disk(cfg)
     if cfg.engine not in cfgmod.COAGULATION_ENGINES:
         from .aggregates.runs import quick_particles
 
@@ -338,6 +342,11 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
         check_writable(out, "netCDF output", "--out")
         if checkpoint:
             check_writable(checkpoint, "checkpoint", "--checkpoint (or use --no-checkpoint)")
+    if cfg.engine == "disk":  # [run] engine = "disk": jaxcoag.disk
+        from .disk.runs import run_disk
+
+        return run_disk(cfg, out=out, checkpoint=checkpoint, resume=resume, progress=progress, figure=figure,
+                        max_segments=max_segments, verbose=verbose, save=save, t_start=t_start)
     if particles:  # [run] engine = "contact" | "rigid": jaxcoag.aggregates
         from .aggregates.runs import run_particles
 

@@ -197,6 +197,7 @@ def _log_mean_mass(lp, t_end=1e11):
     return jnp.log(jnp.sum(rho * GRID.centers) / jnp.sum(rho)), sol
 
 
+@pytest.mark.slow  # suite budget (34 s); binned gradients vs FD stay in the default run: tests/test_binned_gradients.py
 def test_gradient_wrt_surface_energy_and_modulus_matches_fd():
     lp = jnp.log(jnp.array([19.0, 3.7e11]))
     val, sol = _log_mean_mass(lp)

@@ -40,6 +40,7 @@ LP0 = jnp.log(jnp.array([1e-4, 2.4e-11, 162.0, 3.0, 100.0]))
 NAMES = ("alpha", "rho_g", "T", "rho_s", "v_frag")
 
 
+@pytest.mark.slow  # suite budget (34 s); binned gradients vs FD stay in the default run: tests/test_binned_gradients.py
 def test_growth_gradients_wrt_disk_and_material_parameters_match_fd():
     f = lambda lp: _log_peak(lp)[0]
     val, sol = _log_peak(LP0)

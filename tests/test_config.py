@@ -287,7 +287,7 @@ def test_monte_carlo_build_objects():
 
 
 @pytest.mark.parametrize("patch, words", [
-    ("[run]\nengine = \"montecarlo\"\n", ["[run] engine = 'montecarlo' is not one of ['binned', 'mc', 'contact', 'rigid']"]),
+    ("[run]\nengine = \"montecarlo\"\n", ["[run] engine = 'montecarlo' is not one of ['binned', 'mc', 'contact', 'rigid', 'disk']"]),
     ("[run]\nengine = \"mc\"\n", ["missing required parameter [mc] n_particles"]),
     ("[mc]\ngrouping = \"equal\"\n", ["[mc] grouping = 'equal' is not one of", "Did you mean 'equal_mass'"]),
     ("[mc]\ngrouping = \"equal_mass\"\nn_bins = 10\n", ["[mc] n_bins applies to grouping = 'distribution' only"]),

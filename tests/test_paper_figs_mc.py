@@ -41,6 +41,7 @@ def _c(checks, key):
     return checks[key]["computed"]
 
 
+@pytest.mark.slow  # suite budget (32 s); the constant-kernel MC against the exact solution stays in tests/test_mc_*.py
 def test_fig2_8_constant_kernel_const_n(tmp_path):
     """K = 1, const-N, Np = 1000 x 4 runs, t = 1, 1e2, 1e4: moments and E_mass vs the exact solution."""
     ck, _ = _run("fig2_8_constN_constant", tmp_path)
@@ -157,6 +158,7 @@ def test_fig5_8_sum_fragmentation_bathtub(tmp_path):
     assert _c(ck, "|ln(low/high)| (<ln 3)") < math.log(3.0)
 
 
+@pytest.mark.slow  # suite budget (32 s); the MC engine with fragmentation stays in tests/test_mc_*.py
 def test_fig5_9_constant_fragmentation_power_law(tmp_path):
     """K = 1 with catastrophic fragmentation: steady-state m^2 f ~ m^(1/2) (Camacho 2001)."""
     ck, res = _run("fig5_9_constant_fragmentation", tmp_path)

@@ -1,0 +1,185 @@
+"""DustPy and jaxcoag's radial disk side by side, in one invocation (peer benchmark).
+
+Set-ups (DustPy 1.0.9 defaults unless named; Stammler & Birnstiel 2022 §3):
+
+* ``ci``: ``ini.grid.Nr = 30``, ``ini.grid.mmax = 1e2`` g, snapshots 0, 1e2, 1e3, 1e4 yr;
+* ``default``: DustPy's default model (Nr = 100, Nm = 120), snapshots 0 and geomspace(1e3, 1e5, 21) yr
+  (``--t-end-yr`` cuts them).
+
+DustPy runs snapshot by snapshot (no writer; its state is copied at each snapshot, its steps counted).
+jaxcoag runs ``jaxcoag.disk.solve`` of ``dustpy_default`` with the same parameters in parity mode
+(DustPy's discrete system) and in split mode; its compile time is measured apart (first call under
+``jax.jit``) from the run (second call). Compared at every snapshot: the dust mass, the gas mass,
+Sigma_g(r), Sigma_d(r) (relative differences over cells holding more than 1e-12 of the peak dust
+surface density), and a_peak(r) (bin index of the most massive bin per cell; the largest difference
+in bins over the interior cells). Speed is reported as the ratio DustPy wall / jaxcoag wall on the
+same machine in the same run.
+
+``--write-reference``: writes DustPy's ``ci`` snapshots to ``tests/data/dustpy_disk_ref.npz`` (the
+parity test ``tests/test_disk.py`` compares against it; DustPy is not needed there).
+
+Run: ``python benchmarks/peers/dustpy_disk.py [--setup ci|default] [--t-end-yr T] [--modes parity,split]
+[--write-reference]``. Writes ``benchmarks/results/dustpy_disk_<setup>.json``.
+
+References: Stammler & Birnstiel (2022) ApJ 935, 35 (DustPy).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import resource
+import sys
+import time
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+REF = ROOT / "tests" / "data" / "dustpy_disk_ref.npz"
+YR = 3.15576e7  # DustPy's year [s]
+
+
+def snapshots_yr(setup, t_end_yr=None):
+    """Snapshot times [yr] (0 first) of a set-up."""
+    t = np.array([0.0, 1e2, 1e3, 1e4]) if setup == "ci" else np.concatenate([[0.0], np.geomspace(1e3, 1e5, 21)])
+    if t_end_yr is not None:
+        t = t[t <= t_end_yr * (1 + 1e-12)]
+    return t
+
+
+def run_dustpy(setup, t_yr):
+    """DustPy's run of a set-up: dict of t [s], Sigma_d (T, nr, nm), Sigma_g (T, nr), steps (T,), wall [s]."""
+    import dustpy
+
+    sim = dustpy.Simulation()
+    if setup == "ci":
+        sim.ini.grid.Nr = 30
+        sim.ini.grid.mmax = 1e2
+    sim.initialize()
+    sim.writer = None
+    sim.verbosity = 0
+    count = {"n": 0}
+    integrate = sim.integrator.integrate
+
+    def counted():
+        count["n"] += 1
+        return integrate()
+
+    sim.integrator.integrate = counted
+    out = {"t": [float(sim.t)], "sigma_dust": [np.array(sim.dust.Sigma)], "sigma_gas": [np.array(sim.gas.Sigma)],
+           "steps": [0]}
+    wall = 0.0
+    for ty in t_yr[1:]:
+        sim.t.snapshots = np.array([ty * YR])
+        t0 = time.perf_counter()
+        sim.run()
+        wall += time.perf_counter() - t0
+        out["t"].append(float(sim.t))
+        out["sigma_dust"].append(np.array(sim.dust.Sigma))
+        out["sigma_gas"].append(np.array(sim.gas.Sigma))
+        out["steps"].append(count["n"])
+    res = {k: np.asarray(v) for k, v in out.items()}
+    res.update(wall=wall, r=np.array(sim.grid.r), ri=np.array(sim.grid.ri), m=np.array(sim.grid.m),
+               area=np.array(sim.grid.A), a=np.array(sim.dust.a[0]))
+    return res
+
+
+def run_jaxcoag(setup, t_yr, mode):
+    """jaxcoag's run: dict as :func:`run_dustpy` plus compile [s] and the run's peak RSS [MiB]."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from jaxcoag import disk
+
+    kw = dict(nr=30, m_max=1e2) if setup == "ci" else {}
+    model = disk.dustpy_default(**kw)
+    m = disk.Parity() if mode == "parity" else disk.Split()
+    t_out = np.asarray(t_yr) * YR
+
+    @jax.jit
+    def go(model):
+        return disk.solve(model, t_out, mode=m, throw=False)
+
+    t0 = time.perf_counter()
+    lowered = go.lower(model)
+    compiled = lowered.compile()
+    t_compile = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    res = jax.block_until_ready(compiled(model))
+    wall = time.perf_counter() - t0
+    return {"t": np.asarray(res.t), "sigma_dust": np.asarray(res.sigma_dust), "sigma_gas": np.asarray(res.sigma_gas),
+            "steps": np.asarray(res.n_steps), "wall": wall, "compile": t_compile,
+            "status": str(res.status), "split_error": np.asarray(res.split_error),
+            "maxrss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+
+
+def compare(ours, ref, area, a):
+    """Differences of ours against DustPy at every snapshot (see the module docstring)."""
+    rows = []
+    for k in range(len(ref["t"])):
+        sd_o, sd_r = ours["sigma_dust"][k], ref["sigma_dust"][k]
+        md_o, md_r = np.sum(sd_o.sum(-1) * area), np.sum(sd_r.sum(-1) * area)
+        sg_o, sg_r = ours["sigma_gas"][k], ref["sigma_gas"][k]
+        tot_o, tot_r = sd_o.sum(-1), sd_r.sum(-1)
+        sel = tot_r > 1e-12 * tot_r.max()
+        sel[[0, -1]] = False
+        ip_o, ip_r = np.argmax(sd_o, -1), np.argmax(sd_r, -1)
+        rows.append({"t_yr": float(ref["t"][k] / YR),
+                     "dust_mass_rel": float(abs(md_o / md_r - 1)),
+                     "gas_mass_rel": float(abs(np.sum(sg_o * area) / np.sum(sg_r * area) - 1)),
+                     "sigma_gas_rel_max": float(np.max(np.abs(sg_o[1:-1] / sg_r[1:-1] - 1))),
+                     "sigma_dust_rel_max": float(np.max(np.abs(tot_o[sel] / tot_r[sel] - 1))),
+                     "a_peak_bins_max": int(np.max(np.abs(ip_o[1:-1] - ip_r[1:-1]))),
+                     "a_peak_cm_dustpy_mid": float(a[ip_r[len(ip_r) // 2]])})
+    return rows
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--setup", choices=("ci", "default"), default="ci")
+    ap.add_argument("--t-end-yr", type=float, default=None)
+    ap.add_argument("--modes", default="parity,split")
+    ap.add_argument("--write-reference", action="store_true")
+    args = ap.parse_args(argv)
+    t_yr = snapshots_yr(args.setup, args.t_end_yr)
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from _common import machine_info
+
+    print(f"DustPy, set-up {args.setup}, snapshots {t_yr} yr ...", flush=True)
+    ref = run_dustpy(args.setup, t_yr)
+    print(f"  DustPy: {ref['steps'][-1]} steps, {ref['wall']:.2f} s", flush=True)
+    if args.write_reference:
+        if args.setup != "ci":
+            raise SystemExit("--write-reference writes the ci set-up only")
+        REF.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(REF, t=ref["t"], sigma_dust=ref["sigma_dust"], sigma_gas=ref["sigma_gas"],
+                            steps=ref["steps"], r=ref["r"], ri=ref["ri"], m=ref["m"], a=ref["a"])
+        print(f"wrote {REF}")
+    report = {"setup": args.setup, "t_yr": t_yr.tolist(), "machine": machine_info(),
+              "dustpy": {"steps": ref["steps"].tolist(), "wall_s": ref["wall"],
+                         "s_per_step": ref["wall"] / max(int(ref["steps"][-1]), 1)}, "jaxcoag": {}}
+    print(f"{'mode':8s} {'compile s':>9s} {'run s':>8s} {'steps':>7s} {'DustPy/ours':>11s} {'dMdust':>9s} "
+          f"{'dSigma_d':>9s} {'dSigma_g':>9s} {'a_peak bins':>11s}")
+    for mode in [s for s in args.modes.split(",") if s]:
+        ours = run_jaxcoag(args.setup, t_yr, mode)
+        rows = compare(ours, ref, ref["area"], ref["a"])
+        worst = {k: max(r[k] for r in rows) for k in ("dust_mass_rel", "sigma_dust_rel_max", "sigma_gas_rel_max",
+                                                        "a_peak_bins_max")}
+        ratio = ref["wall"] / ours["wall"]
+        print(f"{mode:8s} {ours['compile']:9.2f} {ours['wall']:8.2f} {int(ours['steps'][-1]):7d} {ratio:11.3g} "
+              f"{worst['dust_mass_rel']:9.2e} {worst['sigma_dust_rel_max']:9.2e} {worst['sigma_gas_rel_max']:9.2e} "
+              f"{worst['a_peak_bins_max']:11d}")
+        report["jaxcoag"][mode] = {"compile_s": ours["compile"], "wall_s": ours["wall"],
+                                   "steps": ours["steps"].tolist(), "speed_ratio_dustpy_over_ours": ratio,
+                                   "status": ours["status"], "split_error_max": float(np.max(ours["split_error"])),
+                                   "maxrss_mib_process": ours["maxrss_mib"], "per_snapshot": rows, "worst": worst}
+    out = ROOT / "benchmarks" / "results" / f"dustpy_disk_{args.setup}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=1))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

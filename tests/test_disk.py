@@ -1,0 +1,240 @@
+"""The radial disk engine (jaxcoag.disk): block solve, parity with DustPy, limits, restart, gradients.
+
+DustPy is not needed: its CI set-up (Nr = 30, m_max = 1e2 g, DustPy 1.0.9 defaults otherwise) was run by
+``python benchmarks/peers/dustpy_disk.py --setup ci --modes "" --write-reference`` into
+``tests/data/dustpy_disk_ref.npz``.
+"""
+
+import pathlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxcoag import disk
+from jaxcoag._validate import JaxcoagInputError
+from jaxcoag.disk.blocksolve import block_tridiagonal_solve
+
+DATA = pathlib.Path(__file__).parent / "data"
+YR = disk.gas.DUSTPY_CONSTANTS["year"]
+
+
+def _dense(lo, d, up):
+    n, m = lo.shape
+    A = np.zeros((n * m, n * m))
+    for k in range(n):
+        A[k * m:(k + 1) * m, k * m:(k + 1) * m] = d[k]
+        if k > 0:
+            A[k * m:(k + 1) * m, (k - 1) * m:k * m] = np.diag(lo[k])
+        if k < n - 1:
+            A[k * m:(k + 1) * m, (k + 1) * m:(k + 2) * m] = np.diag(up[k])
+    return A
+
+
+def test_block_tridiagonal_solve_matches_dense_solve_and_its_gradient():
+    rng = np.random.default_rng(3)
+    n, m = 6, 5
+    lo, up, b = rng.normal(size=(n, m)), rng.normal(size=(n, m)), rng.normal(size=(n, m))
+    d = rng.normal(size=(n, m, m)) + 4.0 * np.eye(m)[None]
+    A = _dense(lo, d, up)
+    x = block_tridiagonal_solve(jnp.asarray(lo), jnp.asarray(d), jnp.asarray(up), jnp.asarray(b))
+    np.testing.assert_allclose(np.asarray(x).ravel(), np.linalg.solve(A, b.ravel()), rtol=0, atol=1e-12)
+    # reverse-mode derivative of sum(x^2) w.r.t. the diagonal blocks: dL/dA = -lam x^T with A^T lam = 2x
+    g = jax.grad(lambda dd: jnp.sum(block_tridiagonal_solve(jnp.asarray(lo), dd, jnp.asarray(up),
+                                                            jnp.asarray(b)) ** 2))(jnp.asarray(d))
+    xs = np.linalg.solve(A, b.ravel())
+    lam = np.linalg.solve(A.T, 2 * xs)
+    full = -np.outer(lam, xs)
+    for k in range(n):
+        np.testing.assert_allclose(np.asarray(g[k]), full[k * m:(k + 1) * m, k * m:(k + 1) * m], rtol=1e-9,
+                                   atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------ parity with DustPy
+@pytest.fixture(scope="module")
+def ci_run():
+    """DustPy's CI set-up (Nr = 30, m_max = 1e2 g) to 100 yr in parity mode (117 of DustPy's steps)."""
+    ref = np.load(DATA / "dustpy_disk_ref.npz")
+    model = disk.dustpy_default(nr=30, m_max=1e2)
+    res = disk.solve(model, ref["t"][:2])
+    return model, res, ref
+
+
+def test_parity_with_dustpy_first_100_yr(ci_run):
+    model, res, ref = ci_run
+    np.testing.assert_allclose(np.asarray(model.r), ref["r"], rtol=1e-14)
+    np.testing.assert_allclose(np.asarray(model.m), ref["m"], rtol=1e-14)
+    # the same step sequence: DustPy took 117 steps to the first snapshot
+    assert int(res.n_steps[-1]) == int(ref["steps"][1]) == 117
+    area = np.asarray(res.area)
+    for k in range(2):
+        sd, sd_ref = np.asarray(res.sigma_dust[k]), ref["sigma_dust"][k]
+        md, md_ref = np.sum(sd.sum(-1) * area), np.sum(sd_ref.sum(-1) * area)
+        assert abs(md / md_ref - 1) < 1e-6  # issue bound 1e-6; measured 2.7e-10 (benchmarks/peers/dustpy_disk.py)
+        np.testing.assert_allclose(np.asarray(res.sigma_gas[k]), ref["sigma_gas"][k], rtol=1e-6)
+        tot, tot_ref = sd.sum(-1), sd_ref.sum(-1)
+        np.testing.assert_allclose(tot[1:-1], tot_ref[1:-1], rtol=1e-6)  # issue bound 1 %; measured 1.5e-8
+        big = sd_ref > 1e-6 * sd_ref.sum(-1, keepdims=True)
+        np.testing.assert_allclose(sd[big], sd_ref[big], rtol=1e-5)
+        np.testing.assert_array_equal(np.argmax(sd, -1), np.argmax(sd_ref, -1))
+
+
+def test_result_accessors_budget_and_dataset(ci_run):
+    model, res, ref = ci_run
+    C = disk.gas.DUSTPY_CONSTANTS
+    # gas mass budget: M(t) + accreted + lost outside = M(0) (implicit conservative fluxes)
+    budget = (res.gas_mass + res.m_acc_gas + res.m_out_gas - res.gas_mass[0]) / res.gas_mass[0]
+    assert float(jnp.max(jnp.abs(budget))) < 1e-10
+    # the initial gas disk holds M_disk (LBP on the grid: the part inside 1-1000 au, 0.984 of it)
+    assert 0.97 < float(res.gas_mass[0]) / (0.05 * C["M_sun"]) < 1.0
+    assert abs(float(res.dust_mass[0]) / float(res.gas_mass[0]) - 0.01) < 2e-3  # dust-to-gas 0.01, empty outer cells
+    np.testing.assert_allclose(np.asarray(res.mass_per_bin().sum(-1)), np.asarray(res.dust_mass), rtol=1e-13)
+    np.testing.assert_allclose(np.asarray(res.moments(1)), np.asarray(res.dust_mass), rtol=1e-13)
+    a = np.asarray(res.a)
+    np.testing.assert_allclose(a, (3 * np.asarray(model.m) / (4 * np.pi * 1.67)) ** (1 / 3), rtol=1e-14)
+    # St: Epstein (pi/2) a rho_s / Sigma_g for these small grains (DustPy's convention)
+    st = np.asarray(res.St[0])
+    np.testing.assert_allclose(st[5, :10], np.pi / 2 * a[:10] * 1.67 / float(res.sigma_gas[0, 5]), rtol=1e-12)
+    ds = res.to_xarray()
+    assert ds.attrs["engine"] == "disk" and ds.attrs["status"] == "successful"
+    assert dict(ds.sizes) == {"t": 2, "r": 30, "m": model.nm, "r_edge": 31}
+    np.testing.assert_array_equal(ds["sigma_dust"].values, np.asarray(res.sigma_dust))
+    np.testing.assert_allclose(ds["t_yr"].values, ref["t"][:2] / C["year"] * C["year"] / 3.15576e7, rtol=1e-14)
+    np.testing.assert_allclose(ds["r_au"].values * 1.495978707e13, np.asarray(res.r), rtol=1e-15)
+
+
+# ------------------------------------------------------------------------------------ limits
+@pytest.mark.slow
+def test_fragmentation_limit_without_transport():
+    """Coagulation only: a_peak settles within a factor 2 of a_frag (f_f = 0.37) and never exceeds f_f = 1
+    (Birnstiel, Klahr & Ercolano 2012 eq. 8)."""
+    C = disk.gas.DUSTPY_CONSTANTS
+    model = disk.dustpy_default(nr=6, r_min=3 * C["au"], r_max=30 * C["au"], m_max=1.0, bins_per_decade=5,
+                                dust_transport=False, gas_evolution=False)
+    t = np.array([0.0, 3e3, 2e4]) * C["year"]
+    res = disk.solve(model, t)
+    a_frag, _ = model.size_limits(res.sigma_gas[-1], res.sigma_dust[-1])
+    a_frag = np.asarray(a_frag)[1:-1]
+    ap = np.asarray(res.a_peak())
+    assert np.all(ap[-1, 1:-1] <= a_frag / 0.37)  # never above f_f = 1
+    ratio = ap[-1, 1:-1] / a_frag
+    assert np.all((ratio > 0.5) & (ratio < 2.0)), ratio
+    # the fragmentation equilibrium is steady: a_peak unchanged between 3e3 and 2e4 yr in the inner cells
+    np.testing.assert_array_equal(ap[1, 1:3], ap[2, 1:3])
+    # no transport, no gas evolution: dust mass conserved in the coagulating cells to round-off
+    area = np.asarray(res.area)[1:-1]
+    m_in = np.sum(np.asarray(res.sigma_dust)[:, 1:-1].sum(-1) * area, axis=-1)
+    np.testing.assert_allclose(m_in, m_in[0], rtol=1e-9)
+
+
+# ------------------------------------------------------------------------------------ gradients
+_GBASE = dict(nr=6, r_min=3.0 * 1.495978707e13, r_max=30.0 * 1.495978707e13, m_max=1e-4, bins_per_decade=3)
+
+
+def _grad_outcome(logp, loop="while"):
+    """(interior dust mass [1e-4 Msun], mass-weighted <ln a>) after 10 yr from a top-heavy dust distribution
+    (fragmenting at v_frag ~ 1 m/s), as a function of ln(alpha, v_frag, M_disk, r_c). dt_max = 2 yr binds at every
+    step, so that finite differences see the same step sequence as the derivative (the step-size rule is not
+    differentiated)."""
+    a, vf, md, rc = jnp.exp(logp)
+    model = disk.dustpy_default(**_GBASE, alpha=a, v_frag=vf, m_disk=md, r_c=rc)
+    p = model.initial()
+    w = jnp.sqrt(model.particle_size())
+    sd = 0.01 * p.sigma_gas[:, None] * (w / jnp.sum(w))[None, :]
+    res = disk.solve(model, jnp.array([0.0, 10.0]) * YR, initial=disk.DiskProfile(p.sigma_gas, sd), dt_max=2.0 * YR,
+                     max_steps=12, loop=loop, throw=False)
+    s = res.sigma_dust[-1, 1:-1]
+    mass = jnp.sum(s.sum(-1) * res.area[1:-1]) / (1e-4 * disk.gas.DUSTPY_CONSTANTS["M_sun"])
+    lna = jnp.sum(s * jnp.log(res.a)[None, :]) / jnp.sum(s)
+    return jnp.stack([mass, lna])
+
+
+_X0 = jnp.log(jnp.array([1e-3, 100.0, 0.05 * 1.988409870698051e33, 60 * 1.495978707e13]))
+
+
+def test_forward_gradient_wrt_alpha_vfrag_mdisk_rc_matches_finite_differences():
+    d = jnp.array([0.3, -0.5, 0.7, 0.4])  # one direction through all four log-parameters
+    f0, jv = jax.jvp(_grad_outcome, (_X0,), (d,))
+    h = 1e-4
+    fd = (_grad_outcome(_X0 + h * d) - _grad_outcome(_X0 - h * d)) / (2 * h)
+    np.testing.assert_allclose(np.asarray(jv), np.asarray(fd), rtol=1e-5)
+    assert float(jnp.min(jnp.abs(jv))) > 1e-3  # a derivative that is not trivially zero
+
+
+@pytest.mark.slow
+def test_reverse_gradient_equals_forward_and_finite_differences():
+    J = jax.jacfwd(_grad_outcome)(_X0)
+    g = jax.grad(lambda x: _grad_outcome(x, "scan")[1])(_X0)
+    np.testing.assert_allclose(np.asarray(g), np.asarray(J[1]), rtol=1e-8, atol=1e-14)
+    # every parameter matters (v_frag through fragmentation of the top-heavy start)
+    assert float(jnp.min(jnp.max(jnp.abs(J), axis=0))) > 1e-4
+    h = 1e-4
+    for k in range(4):
+        e = jnp.zeros(4).at[k].set(h)
+        fd = (_grad_outcome(_X0 + e) - _grad_outcome(_X0 - e)) / (2 * h)
+        np.testing.assert_allclose(np.asarray(J[:, k]), np.asarray(fd), rtol=1e-5, atol=1e-9)
+
+
+# ------------------------------------------------------------------------------------ config, CLI, restart
+def _disk_cfg():
+    from jaxcoag import config
+
+    return config.from_dict({"run": {"engine": "disk", "name": "t"},
+                             "disk": {"nr": 6, "r_min_au": 3.0, "r_max_au": 30.0, "m_max": 1e-4, "bins_per_decade": 3},
+                             "time": {"t_out_yr": [5.0, 10.0]}})
+
+
+def test_cli_run_restart_is_bit_identical(tmp_path):
+    from jaxcoag import runner
+    from jaxcoag.io import load_netcdf
+
+    cfg = _disk_cfg()
+    full = runner.run(cfg, out=tmp_path / "a.nc", progress=False, verbose=False)
+    assert full.finished and full.numbers["result"] == "successful"
+    part = runner.run(cfg, out=tmp_path / "b.nc", max_segments=2, progress=False, verbose=False)
+    assert not part.finished and part.path is None  # nothing written before the run is complete
+    rest = runner.run(cfg, out=tmp_path / "b.nc", resume=True, progress=False, verbose=False)
+    assert rest.finished and rest.resumed_from == 2
+    a, b = load_netcdf(str(tmp_path / "a.nc")), load_netcdf(str(tmp_path / "b.nc"))
+    for k in ("sigma_dust", "sigma_gas", "St", "n_steps"):
+        np.testing.assert_array_equal(a[k].values, b[k].values)
+    assert a.attrs["engine"] == "disk" and dict(a.sizes) == {"t": 3, "r": 6, "m": 25, "r_edge": 7}
+    np.testing.assert_allclose(a["t_yr"].values, [0.0, 5.0, 10.0], rtol=1e-14)
+    assert (tmp_path / "a.png").stat().st_size > 20_000
+    # the summary is the dataset's numbers
+    assert a.attrs["summary_steps"] == int(a["n_steps"].values[-1]) > 0
+    np.testing.assert_allclose(a.attrs["summary_dust_mass_msun_end"] * 1.98847e33,  # jaxcoag.constants.M_sun
+                               a["dust_mass"].values[-1], rtol=1e-12)
+    # the model built from the config is dustpy_default with the same numbers
+    C = disk.gas.DUSTPY_CONSTANTS
+    model = full.built["model"]
+    ref = disk.dustpy_default(nr=6, r_min=3 * C["au"], r_max=30 * C["au"], m_max=1e-4, bins_per_decade=3)
+    for k in ("r", "m", "alpha", "m_disk", "r_c", "m_star", "r_star", "mu", "v_frag"):
+        np.testing.assert_array_equal(np.asarray(getattr(model, k)), np.asarray(getattr(ref, k)))
+
+
+def test_bad_disk_input_is_refused_before_work():
+    from jaxcoag import config
+
+    with pytest.raises(JaxcoagInputError, match="nr"):
+        disk.dustpy_default(nr=3)
+    with pytest.raises(JaxcoagInputError, match="alpha"):
+        disk.dustpy_default(alfa=1e-3)
+    with pytest.raises(JaxcoagInputError, match="v_frag"):
+        disk.dustpy_default(v_frag=-1.0)
+    with pytest.raises(JaxcoagInputError, match="GiB"):
+        disk.dustpy_default(nr=2000, bins_per_decade=20)
+    with pytest.raises(JaxcoagInputError, match="loop"):
+        disk.Disk(loop="fast")
+    with pytest.raises(JaxcoagInputError, match="cfl"):
+        disk.Disk(mode=disk.Parity(cfl=2.0))
+    model = disk.dustpy_default(nr=6, m_max=1e-6, coagulation=False)
+    with pytest.raises(JaxcoagInputError, match="shape"):
+        disk.solve(model, [0.0, 1.0], initial=disk.DiskProfile(jnp.ones(6), jnp.ones((6, 3))))
+    with pytest.raises(JaxcoagInputError, match="finite"):
+        disk.solve(model, [0.0, 1.0], initial=disk.DiskProfile(jnp.ones(6), -jnp.ones((6, model.nm))))
+    with pytest.raises(JaxcoagInputError, match="r_max_au"):
+        config.from_dict({"run": {"engine": "disk"}, "disk": {"r_min_au": 10.0, "r_max_au": 5.0}})
+    with pytest.raises(JaxcoagInputError, match="unknown key"):
+        config.from_dict({"run": {"engine": "disk"}, "disk": {"alpah": 1e-3}})
