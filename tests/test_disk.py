@@ -238,3 +238,17 @@ def test_bad_disk_input_is_refused_before_work():
         config.from_dict({"run": {"engine": "disk"}, "disk": {"r_min_au": 10.0, "r_max_au": 5.0}})
     with pytest.raises(JaxcoagInputError, match="unknown key"):
         config.from_dict({"run": {"engine": "disk"}, "disk": {"alpah": 1e-3}})
+
+
+def test_split_mode_close_to_parity_mode():
+    """Fast mode (Strang splitting) against the monolithic step on the same model and step rule."""
+    C = disk.gas.DUSTPY_CONSTANTS
+    model = disk.dustpy_default(nr=6, r_min=3 * C["au"], r_max=30 * C["au"], m_max=1e-4, bins_per_decade=3)
+    t = jnp.array([0.0, 10.0]) * YR
+    par = disk.solve(model, t)
+    spl = disk.solve(model, t, mode=disk.Split())
+    assert float(jnp.abs(spl.dust_mass[-1] / par.dust_mass[-1] - 1)) < 2e-2  # issue bound for the fast mode
+    ip, isp = np.argmax(np.asarray(par.sigma_dust[-1]), -1), np.argmax(np.asarray(spl.sigma_dust[-1]), -1)
+    assert np.max(np.abs(ip - isp)) <= 2
+    np.testing.assert_allclose(np.asarray(spl.sigma_gas), np.asarray(par.sigma_gas), rtol=1e-12)  # same gas step
+    assert float(par.split_error[-1]) == 0.0 and 0.0 < float(spl.split_error[-1]) < np.inf

@@ -16,7 +16,6 @@ References: Stammler & Birnstiel (2022, ApJ 935, 35); Birnstiel, Klahr & Ercolan
 
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
@@ -66,24 +65,14 @@ def quick_disk(cfg):
     return cfgmod.from_dict(raw, source=cfg.source + " (quick)")
 
 
-def _save(fig, path):
-    """Write a figure atomically (temporary file, then rename) and close it."""
-    import matplotlib.pyplot as plt
-
-    fig.tight_layout()
-    tmp = path + ".tmp.png"
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
-
-
 def disk_figure(result, model, path, title=""):
     """The standard disk figure (module docstring) written atomically to ``path`` (PNG)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from ..aggregates.runs import _save
 
     r_au = np.asarray(result.r) / C.AU
     a = np.asarray(result.a)
