@@ -169,9 +169,9 @@ class DiskResult(AbstractResult):
         St: (T, nr, nm) Stokes numbers.
         n_steps: (T,) steps taken up to each output.
         m_acc_gas: (T,) gas mass through the inner boundary since t = 0 [g]; m_out_gas: through the outer.
-        split_error: (T,) largest per-step splitting-error estimate so far (``Split`` mode: max relative
-            difference of Lie against Strang splitting over bins holding > 1e-6 of their cell's dust; 0 in
-            parity mode).
+        split_error: (T,) largest per-step splitting-error estimate so far (``Split`` mode: the largest
+            disk-integrated mass-weighted difference of one step, sum |Lie - Strang| A / sum Strang A over the
+            interior cells and bins; 0 in parity mode).
         status_code: (T,) int status per output.
         final_state: the :class:`~jaxcoag.disk.solve.DiskState` at ``t[-1]`` (pass the result as ``initial``
             to continue).
