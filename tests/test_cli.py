@@ -84,7 +84,7 @@ def _write(tmp_path, text, name="s.toml"):
 @pytest.mark.parametrize("patch, args, words", [
     ("[gas]\nalpha = 1e-3\n", [], "Cannot declare"),  # duplicate table: invalid TOML
     ("[output]\nfigur = false\n", [], "unknown key 'figur' in section [output]"),
-    ("[disk]\nR_au = 1\n", [], "unknown section [disk]"),
+    ("[nebula]\nR_au = 1\n", [], "unknown section [nebula]"),
     ("", ["--set", "gas.alpha=-1e-3"], "[gas] alpha must be >= 0"),
     ("", ["--set", "dust.rho_s=nan"], "[dust] rho_s must be finite"),
     ("", ["--set", "grid.bins_per_decade=0.05"], "at least 2 bins"),

@@ -153,6 +153,7 @@ def _grad_outcome(logp, loop="while"):
 _X0 = jnp.log(jnp.array([1e-3, 100.0, 0.05 * 1.988409870698051e33, 60 * 1.495978707e13]))
 
 
+@pytest.mark.slow  # suite budget (47 s on 2 cores); the reverse/forward/FD check below is slow too
 def test_forward_gradient_wrt_alpha_vfrag_mdisk_rc_matches_finite_differences():
     d = jnp.array([0.3, -0.5, 0.7, 0.4])  # one direction through all four log-parameters
     f0, jv = jax.jvp(_grad_outcome, (_X0,), (d,))
