@@ -56,6 +56,7 @@ def test_contact_material_overrides():
     assert math.isclose(float(m.F_c) / float(q.F_c), 2.0, rel_tol=1e-14)
 
 
+@pytest.mark.slow  # suite budget (28 s); the contact engine through evolve stays in tests/test_contact_*.py
 def test_contact_run_writes_netcdf_figure_and_summary(tmp_path):
     from jaxcoag import runner
     from jaxcoag.io import load_netcdf

@@ -241,6 +241,7 @@ def test_bad_disk_input_is_refused_before_work():
         config.from_dict({"run": {"engine": "disk"}, "disk": {"alpah": 1e-3}})
 
 
+@pytest.mark.slow  # suite budget (20 s); split vs DustPy: benchmarks/peers/dustpy_disk.py
 def test_split_mode_close_to_parity_mode():
     """Fast mode (Strang splitting) against the monolithic step on the same model and step rule."""
     C = disk.gas.DUSTPY_CONSTANTS

@@ -139,6 +139,7 @@ SHARD_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # suite budget (25 s); sharding stays in the default run through examples/04_sharded_sweep.py --quick
 def test_sharded_equals_unsharded_subprocess():
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     r = subprocess.run([sys.executable, "-c", SHARD_SCRIPT.format(root=ROOT)], capture_output=True, text=True,
