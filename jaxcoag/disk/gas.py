@@ -31,7 +31,6 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from .. import constants as C
-from ..physics.safe import safe_sqrt
 from .grid import const_grad_row, const_grad_value, implicit_tridiagonal_step, interp_to_interfaces
 
 __all__ = [

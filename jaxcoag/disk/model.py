@@ -20,7 +20,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import constants as C
 from .._validate import JaxcoagInputError, is_traced, require_x64
 from . import gas as _gas
 from . import transport as _tr

@@ -29,7 +29,6 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from ..physics.safe import safe_sqrt
 from .._validate import JaxcoagInputError
 from .gas import hydro_source_gas
 from .grid import const_grad_row, const_grad_value, implicit_tridiagonal_step, interp_to_interfaces
