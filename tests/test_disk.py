@@ -104,6 +104,32 @@ def test_result_accessors_budget_and_dataset(ci_run):
     np.testing.assert_allclose(ds["r_au"].values * 1.495978707e13, np.asarray(res.r), rtol=1e-15)
 
 
+def test_smooth_peak_size_exact_for_lognormal_and_differentiable(ci_run):
+    """a_peak(smooth=True): the parabola through ln Sigma_d is exact for a log-normal in a (ln Sigma quadratic in
+    ln a), so its vertex is the log-normal's centre, between bins, with d ln a_peak / d ln a_0 = 1; on the run's
+    own distributions it stays within half a bin of the most massive bin."""
+    import equinox as eqx
+
+    _, res, _ = ci_run
+    la = jnp.log(res.a)
+
+    def peak(la0):
+        sd = jnp.exp(-0.5 * ((la[None, None, :] - la0) / 0.7) ** 2) * jnp.ones((2, 30, 1))
+        return eqx.tree_at(lambda r: r.sigma_dust, res, sd).a_peak(smooth=True)[0, 7]
+
+    val_grad = jax.jit(jax.value_and_grad(lambda x: jnp.log(peak(x))))  # one compile (eager: 5 s)
+    for a0 in (3.3e-3, 2.0e-1):  # between bins
+        v, g = val_grad(jnp.log(a0))
+        np.testing.assert_allclose(float(v), np.log(a0), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(float(g), 1.0, rtol=1e-10)
+    half_bin = 0.5 * float(la[1] - la[0])
+    d = np.abs(np.log(np.asarray(res.a_peak(smooth=True))) - np.log(np.asarray(res.a_peak())))
+    assert np.all(d <= half_bin + 1e-12)
+    # a peak in the first bin (Sigma_d per bin falling with a) returns that bin's radius
+    edge = eqx.tree_at(lambda r: r.sigma_dust, res, jnp.broadcast_to(jnp.exp(-la), res.sigma_dust.shape))
+    np.testing.assert_allclose(np.asarray(edge.a_peak(smooth=True)), float(res.a[0]), rtol=1e-15)
+
+
 # ------------------------------------------------------------------------------------ limits
 @pytest.mark.slow
 def test_fragmentation_limit_without_transport():
@@ -126,6 +152,31 @@ def test_fragmentation_limit_without_transport():
     area = np.asarray(res.area)[1:-1]
     m_in = np.sum(np.asarray(res.sigma_dust)[:, 1:-1].sum(-1) * area, axis=-1)
     np.testing.assert_allclose(m_in, m_in[0], rtol=1e-9)
+
+
+@pytest.mark.slow
+def test_drift_limit_outer_disk():
+    """v_frag = 10 m/s (DustPy's default disk otherwise, 10-300 au): after 1 Myr the outer disk (100-165 au) is
+    drift-limited - a_frag above 10 a_drift - and the peak size sits at the drift limit a_drift (f_d = 0.55,
+    Birnstiel, Klahr & Ercolano 2012 eq. 18) within a factor 2 (measured a_peak / a_drift = 0.57-0.72), falling
+    outwards with it. Split mode, 30 cells (77 s on the 2-core machine)."""
+    C = disk.gas.DUSTPY_CONSTANTS
+    model = disk.dustpy_default(nr=30, r_min=10 * C["au"], r_max=300 * C["au"], m_max=1e3, bins_per_decade=5,
+                                v_frag=1000.0)
+    res = disk.solve(model, np.array([0.0, 1e6]) * C["year"], mode=disk.Split())
+    assert res.to_xarray().attrs["status"] == "successful"
+    a_frag, a_drift = (np.asarray(x) for x in model.size_limits(res.sigma_gas[-1], res.sigma_dust[-1]))
+    r = np.asarray(res.r) / C["au"]
+    sel = (r >= 100.0) & (r <= 165.0)
+    assert sel.sum() >= 4
+    assert np.all(a_frag[sel] > 10.0 * a_drift[sel])  # drift-, not fragmentation-limited
+    ratio = np.asarray(res.a_peak())[-1, sel] / a_drift[sel]
+    assert np.all((ratio > 0.5) & (ratio < 2.0)), ratio
+    assert np.all(np.diff(np.asarray(res.a_peak(smooth=True))[-1, sel]) < 0)  # the drift limit falls outwards
+    # the inner disk (10-100 au) too: drift-limited and at a_drift within a factor 2
+    inner = (r > 11.0) & (r < 100.0)
+    ratio_in = np.asarray(res.a_peak())[-1, inner] / a_drift[inner]
+    assert np.all((ratio_in > 0.5) & (ratio_in < 2.0)), ratio_in
 
 
 # ------------------------------------------------------------------------------------ gradients

@@ -72,8 +72,39 @@ def _check_05(out):
     assert out["m_peak"] > 1e6 * m0
 
 
+def _check_06(out):
+    # Levenberg-Marquardt from alpha x 3, v_frag / 3 recovers DustPy's defaults from the 1 %-noise profile; the errors
+    # are the noise's (measured 1.4e-3 and 3.5e-4, within 1 Fisher sigma 1.9e-3 and 2.4e-3)
+    lm = out["levenberg_marquardt"]
+    assert lm["successful"]
+    sig = out["sigma_ln_params"]
+    assert abs(lm["rel_err_alpha"]) < max(3 * sig[0], 1e-3) and abs(lm["rel_err_v_frag"]) < max(3 * sig[1], 1e-3)
+    assert abs(lm["rel_err_alpha"]) < 1e-2 and abs(lm["rel_err_v_frag"]) < 1e-2
+    # chi^2/2 falls from the start to the noise floor (expected n_data/2 = 16 for the residuals in noise units)
+    assert lm["loss0"] > 1e3 * lm["loss"]
+    assert lm["loss"] < out["n_data"]
+    # alpha and v_frag are constrained separately, not only through v_frag^2 / alpha (measured correlation 0.22)
+    assert out["jacobian_column_correlation"] < 0.9
+
+
+def _check_07(out):
+    # 2 x 2 disks; the vmapped sweep equals the loop of jitted solves (measured 8.8e-15) and the sharded sweep the
+    # unsharded one (measured 0.0, one device)
+    assert out["n_members"] == 4 and out["n_failed"] == 0
+    assert out["rel_diff_loop"] < 1e-10 and out["rel_diff_sharded"] < 1e-10
+    assert out["dims"] == ["alpha", "v_frag", "t", "r"]
+    # stronger turbulence at v_frag = 2 m/s grows the innermost grains faster within 1000 yr (measured a_mean
+    # 1.7e-3 cm at alpha = 3e-4 and 1.4e-2 cm at 3e-3)
+    a = np.asarray(out["a_mean_last_inner"])
+    assert a[1, 1] > 3 * a[0, 1]
+
+
 CHECKS = {"01_velocities_and_kernel": _check_01, "02_fit_nebula_parameters": _check_02,
-          "03_parameter_sweep": _check_03, "04_sharded_sweep": _check_04, "05_cli_run": _check_05}
+          "03_parameter_sweep": _check_03, "04_sharded_sweep": _check_04, "05_cli_run": _check_05,
+          "06_fit_disk_alpha_vfrag": _check_06, "07_disk_ensemble": _check_07}
+# the disk examples compile the radial disk's time loop (and its Jacobian): 40 s each on 2 cores, over the default
+# suite's budget; they run with -m slow
+SLOW = {"06_fit_disk_alpha_vfrag", "07_disk_ensemble"}
 
 
 def test_every_example_has_checks():
@@ -84,7 +115,8 @@ def _tree(d):
     return sorted(os.path.relpath(os.path.join(r, f), d) for r, _, fs in os.walk(d) for f in fs)
 
 
-@pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW else p for p in EXAMPLES],
+                         ids=[p.stem for p in EXAMPLES])
 def test_example_quick(path, capsys, tmp_path, monkeypatch):
     argv = ["--quick"]
     if path.stem == "05_cli_run":

@@ -19,7 +19,7 @@ same machine in the same run.
 parity test ``tests/test_disk.py`` compares against it; DustPy is not needed there).
 
 Run: ``python benchmarks/peers/dustpy_disk.py [--setup ci|default] [--t-end-yr T] [--modes parity,split]
-[--write-reference]``. Writes ``benchmarks/results/dustpy_disk_<setup>.json``.
+[--write-reference] [--dustpy-cache FILE.npz]``. Writes ``benchmarks/results/dustpy_disk_<setup>.json``.
 
 References: Stammler & Birnstiel (2022) ApJ 935, 35 (DustPy).
 """
@@ -126,7 +126,18 @@ def compare(ours, ref, area, a):
         sel = tot_r > 1e-12 * tot_r.max()
         sel[[0, -1]] = False
         ip_o, ip_r = np.argmax(sd_o, -1), np.argmax(sd_r, -1)
+        w = area[1:-1]
+        interior = np.zeros_like(sel)
+        interior[1:-1] = True
+        r_au = ref["r"] / 1.495978707e13
         rows.append({"t_yr": float(ref["t"][k] / YR),
+                     "sigma_dust_worst_r_au": float(r_au[sel][np.argmax(np.abs(tot_o[sel] / tot_r[sel] - 1))]),
+                     "sigma_gas_worst_r_au": float(r_au[1:-1][np.argmax(np.abs(sg_o[1:-1] / sg_r[1:-1] - 1))]),
+                     # mass-weighted L1 differences over the interior cells: sum |d Sigma| A / sum Sigma A
+                     "sigma_dust_l1_mass_weighted": float(np.sum(np.abs(tot_o - tot_r)[1:-1] * w)
+                                                          / np.sum(tot_r[1:-1] * w)),
+                     "sigma_gas_l1_mass_weighted": float(np.sum(np.abs(sg_o - sg_r)[1:-1] * w) / np.sum(sg_r[1:-1] * w)),
+                     "sigma_gas_rel_max_dusty_cells": float(np.max(np.abs(sg_o[sel] / sg_r[sel] - 1))),
                      "dust_mass_rel": float(abs(md_o / md_r - 1)),
                      "gas_mass_rel": float(abs(np.sum(sg_o * area) / np.sum(sg_r * area) - 1)),
                      "sigma_gas_rel_max": float(np.max(np.abs(sg_o[1:-1] / sg_r[1:-1] - 1))),
@@ -142,13 +153,25 @@ def main(argv=None):
     ap.add_argument("--t-end-yr", type=float, default=None)
     ap.add_argument("--modes", default="parity,split")
     ap.add_argument("--write-reference", action="store_true")
+    ap.add_argument("--dustpy-cache", default=None, help="npz file: DustPy's snapshots are read from it when it "
+                    "exists (DustPy is not run again) and written to it otherwise")
     args = ap.parse_args(argv)
     t_yr = snapshots_yr(args.setup, args.t_end_yr)
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from _common import machine_info
 
-    print(f"DustPy, set-up {args.setup}, snapshots {t_yr} yr ...", flush=True)
-    ref = run_dustpy(args.setup, t_yr)
+    cache = pathlib.Path(args.dustpy_cache) if args.dustpy_cache else None
+    if cache is not None and cache.exists():
+        ref = dict(np.load(cache))
+        ref["wall"] = float(ref["wall"])
+        if ref["t"].shape != t_yr.shape or not np.allclose(ref["t"], t_yr * YR, rtol=1e-9):
+            raise SystemExit(f"{cache} holds other snapshots; delete it or pass another --dustpy-cache")
+        print(f"DustPy's run read from {cache} (its wall time {ref['wall']:.1f} s from the run that wrote it)")
+    else:
+        print(f"DustPy, set-up {args.setup}, snapshots {t_yr} yr ...", flush=True)
+        ref = run_dustpy(args.setup, t_yr)
+        if cache is not None:
+            np.savez_compressed(cache, **ref)
     print(f"  DustPy: {ref['steps'][-1]} steps, {ref['wall']:.2f} s", flush=True)
     if args.write_reference:
         if args.setup != "ci":
@@ -166,7 +189,8 @@ def main(argv=None):
         ours = run_jaxcoag(args.setup, t_yr, mode)
         rows = compare(ours, ref, ref["area"], ref["a"])
         worst = {k: max(r[k] for r in rows) for k in ("dust_mass_rel", "sigma_dust_rel_max", "sigma_gas_rel_max",
-                                                        "a_peak_bins_max")}
+                                                        "a_peak_bins_max", "sigma_dust_l1_mass_weighted",
+                                                        "sigma_gas_l1_mass_weighted", "sigma_gas_rel_max_dusty_cells")}
         ratio = ref["wall"] / ours["wall"]
         print(f"{mode:8s} {ours['compile']:9.2f} {ours['wall']:8.2f} {int(ours['steps'][-1]):7d} {ratio:11.3g} "
               f"{worst['dust_mass_rel']:9.2e} {worst['sigma_dust_rel_max']:9.2e} {worst['sigma_gas_rel_max']:9.2e} "
