@@ -91,6 +91,7 @@ def run_jaxcoag(setup, t_yr, mode):
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    import jaxcoag
     from jaxcoag import disk
 
     kw = dict(nr=30, m_max=1e2) if setup == "ci" else {}
@@ -111,7 +112,7 @@ def run_jaxcoag(setup, t_yr, mode):
     wall = time.perf_counter() - t0
     return {"t": np.asarray(res.t), "sigma_dust": np.asarray(res.sigma_dust), "sigma_gas": np.asarray(res.sigma_gas),
             "steps": np.asarray(res.n_steps), "wall": wall, "compile": t_compile,
-            "status": str(res.status), "split_error": np.asarray(res.split_error),
+            "status": jaxcoag.status_names(res.status), "split_error": np.asarray(res.split_error),
             "maxrss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
