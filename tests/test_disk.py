@@ -237,6 +237,7 @@ def _disk_cfg():
                              "time": {"t_out_yr": [5.0, 10.0]}})
 
 
+@pytest.mark.slow  # suite budget (22 s); bitwise resume of the shared checkpoint driver stays in tests/test_checkpoint.py
 def test_cli_run_restart_is_bit_identical(tmp_path):
     from jaxcoag import runner
     from jaxcoag.io import load_netcdf

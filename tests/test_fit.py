@@ -35,6 +35,7 @@ def test_levenberg_marquardt_recovers(problem):
     assert res.loss < 0.5 * np.sum((0.005 * 3 * np.sqrt(np.maximum(np.asarray(target), 0))) ** 2)
 
 
+@pytest.mark.slow  # suite budget (20 s on 2 cores); Levenberg-Marquardt on the same box stays in the default run
 def test_adam_recovers(problem):
     m, truth, target, init = problem
     res = fit.fit_adam(m, target, init, steps=150)

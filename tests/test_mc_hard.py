@@ -93,6 +93,7 @@ def test_1e160_particles_product_kernel():
     assert float(np.log10(res.largest_mass()[-1])) > 159.0  # beta(2) = 0.797 -> 8e159
 
 
+@pytest.mark.slow  # suite budget (20 s on 2 cores)
 def test_equal_mass_scheduled_merge_keeps_capacity():
     """Spec §2.7/§7: equal-mass runs merge mass neighbours once Ns > 0.9 S (down to 0.7 S), so the
     demagnification leftovers (MC hazard 3) never exhaust the slots: no CAPACITY flag, Ns stays
