@@ -56,8 +56,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="coarser mass grid, earlier epochs, Levenberg-Marquardt only")
     args = ap.parse_args(argv)
-    observe = forward_model(args.quick)[0]
-    t_obs = forward_model(args.quick)[1]
+    observe, t_obs = forward_model(args.quick)
     x_true = jnp.log(jnp.array([TRUTH["alpha"], TRUTH["v_frag"]]))
     x0 = x_true + jnp.log(jnp.array([3.0, 1.0 / 3.0]))
     noise = 0.01
@@ -116,9 +115,10 @@ def main(argv=None):
         def adam(x):
             def step(carry, _):
                 z, s = carry
-                g = jax.jacfwd(loss)(z)
+                # the loss as jacfwd's aux: one forward solve per step gives both value and gradient
+                g, v = jax.jacfwd(lambda q: (loss(q), loss(q)), has_aux=True)(z)
                 upd, s = opt.update(g, s, z)
-                return (optax.apply_updates(z, upd), s), loss(z)
+                return (optax.apply_updates(z, upd), s), v
 
             (z, _), hist = jax.lax.scan(step, (x, opt.init(x)), None, length=60)
             return z, hist, loss(z)

@@ -1,4 +1,4 @@
-"""A vmapped ensemble of radial disks over (alpha, v_frag), sharded over devices where there are several.
+"""A vmapped ensemble of radial disks over (alpha, v_frag), sharded over accelerators where there are several.
 
 Shows: jaxcoag.sweep.sweep over DustPy's disk model (jaxcoag.disk, split mode) on an alpha x v_frag grid in one
 compiled program - every member its own adaptive step sequence inside the batched lax.while_loop - returning an
@@ -9,7 +9,7 @@ loop over one jitted solve, with the throughput (members/s) of each.
 Sharding is for accelerators. Several *CPU* devices of one host (XLA_FLAGS=--xla_force_host_platform_device_count)
 deadlock here: each device thread blocks inside jaxlib's batched LAPACK LU (lapack_dgetrf_ffi -> ParallelBatchMap)
 waiting for tasks queued on the host thread pool its peers occupy (jax 0.10.2; seen in gdb). On a CPU host use the
-vmapped sweep (it already uses every core); this example shards only over one CPU device or over GPUs/TPUs.
+vmapped sweep; this example shards only over one CPU device or over GPUs/TPUs.
 
     python examples/07_disk_ensemble.py [--quick]
 
@@ -94,7 +94,8 @@ def main(argv=None):
     print(f"max rel. difference of a_mean: sweep vs loop {rel_loop:.2e}, sharded vs unsharded {rel_shard:.2e}; "
           f"failed members {int(ds.attrs['n_failed'])}")
     mass = ds["dust_mass"].values[..., -1]
-    print("dust mass left [Msun] (rows alpha, columns v_frag):\n" + np.array2string(mass / C["M_sun"], formatter={"float_kind": "{:.6e}".format}))
+    table = np.array2string(mass / C["M_sun"], formatter={"float_kind": "{:.6e}".format})
+    print("dust mass left [Msun] (rows alpha, columns v_frag):\n" + table)
     print(ds)
     return dict(n_members=n_members, n_devices=len(devices), n_failed=int(ds.attrs["n_failed"]),
                 rel_diff_loop=rel_loop, rel_diff_sharded=rel_shard, seconds_vmap=t_vmap, seconds_loop=t_loop,
