@@ -8,8 +8,9 @@ loop over one jitted solve, with the throughput (members/s) of each.
 
 Sharding is for accelerators. Several *CPU* devices of one host (XLA_FLAGS=--xla_force_host_platform_device_count)
 deadlock here: each device thread blocks inside jaxlib's batched LAPACK LU (lapack_dgetrf_ffi -> ParallelBatchMap)
-waiting for tasks queued on the host thread pool its peers occupy (jax 0.10.2; seen in gdb). On a CPU host use the
-vmapped sweep; this example shards only over one CPU device or over GPUs/TPUs.
+waiting for tasks queued on the host thread pool its peers occupy (jax 0.10.2; seen in gdb), so ``jaxcoag.sweep``
+refuses such a mesh with an error before running. On a CPU host use the vmapped sweep; this example shards only over
+one CPU device or over GPUs/TPUs.
 
     python examples/07_disk_ensemble.py [--quick]
 
@@ -53,26 +54,25 @@ def main(argv=None):
     attrs = {"model": "DustPy default (Stammler & Birnstiel 2022)", "mode": "split", "t_yr": list(t_yr)}
     r_au = np.asarray(disk.dustpy_default(**grid).r) / C["au"]
 
+    dims = {"dust_mass": "t", "a_mean": ("t", "r"), "sigma_dust": ("t", "r"), "steps": "t"}
+
     def label(ds):
-        """The sweep names extra output axes <name>_dim<i>: call them t and r, with t_yr and r_au coordinates."""
-        dims = {f"{v}_dim0": "t" for v in ("dust_mass", "a_mean", "sigma_dust", "steps")}
-        dims.update(a_mean_dim1="r", sigma_dust_dim1="r")
-        ds = ds.rename_dims({k: v for k, v in dims.items() if k in ds.dims})
+        """t_yr and r_au coordinates on the t and r axes."""
         return ds.assign_coords(t_yr=("t", np.asarray(t_yr)), r_au=("r", r_au))
 
     t0 = time.perf_counter()
-    ds = label(sweep(member, params, attrs=attrs))
+    ds = label(sweep(member, params, attrs=attrs, dims=dims))
     t_vmap_first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    sweep(member, params)  # the same function and shapes: the compiled program is reused
+    sweep(member, params, dims=dims)  # the same function and shapes: the compiled program is reused
     t_vmap = time.perf_counter() - t0
 
     devices = jax.devices()
     if len(devices) > 1 and all(d.platform == "cpu" for d in devices):
-        devices = devices[:1]  # see the module docstring: several CPU devices deadlock in the batched LU
+        devices = devices[:1]  # jaxcoag.sweep refuses several CPU devices for a program with LAPACK factorisations
         print("several CPU devices: sharding over one (jaxlib's batched LAPACK deadlocks across CPU devices)")
     t0 = time.perf_counter()
-    sharded = label(sweep(member, params, devices=devices))
+    sharded = label(sweep(member, params, devices=devices, dims=dims))
     t_shard_first = time.perf_counter() - t0
 
     one = jax.jit(member)

@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 
 import numpy as np
 import jax
@@ -229,6 +230,28 @@ def _member_fn(fn, names, meta, edges):
     return one
 
 
+def _check_dims(dims, fn, names, cols, edges):
+    """Trace fn once (no run) and check that ``dims`` names existing outputs with the right number of axes."""
+    prog, meta = _compiled(fn, tuple(names), None, None, len(cols), edges)
+    shapes = jax.eval_shape(prog, *[jax.ShapeDtypeStruct(c[:1].shape, jnp.float64) for c in cols])
+    for k, v in dims.items():
+        if "edges" in meta:
+            raise JaxcoagInputError("dims= is for functions returning a dict or an array; an engine result already "
+                                    "has named axes (t, m).")
+        if k not in shapes:
+            raise JaxcoagInputError(f"dims names {k!r}, which fn does not return; its outputs are "
+                                    f"{', '.join(sorted(shapes))}.")
+        if len(v) != len(shapes[k].shape) - 1:
+            raise JaxcoagInputError(f"dims[{k!r}] names {len(v)} axes but output {k!r} has "
+                                    f"{len(shapes[k].shape) - 1} beyond the parameters (shape {shapes[k].shape[1:]}).")
+    sizes = {}
+    for k, v in dims.items():
+        for d, n in zip(v, shapes[k].shape[1:]):
+            if sizes.setdefault(d, (n, k))[0] != n:
+                raise JaxcoagInputError(f"dimension {d!r} has length {sizes[d][0]} in output {sizes[d][1]!r} but {n} "
+                                        f"in {k!r}; give the axes different names.")
+
+
 def _resolve_mesh(mesh, devices):
     if mesh is not None and devices is not None:
         raise JaxcoagInputError("give either mesh= or devices=, not both.")
@@ -306,12 +329,34 @@ def _run(fn, names, cols, chunk, mesh, progress=False, edges=None):
     sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(tuple(mesh.axis_names)))
     padded = [np.concatenate([c, np.repeat(c[-1:], npad)]) if npad else c for c in cols]
     placed = [jax.make_array_from_callback(p.shape, sharding, lambda idx, p=p: p[idx]) for p in padded]
+    _refuse_cpu_lapack(prog, placed, mesh)
     out = prog(*placed)
     return {k: _gather(v)[:n] for k, v in out.items()}, meta
 
 
+_LAPACK_FACTOR = re.compile(r"lapack_[sdcz](getrf|geqrf|potrf|syevd|heevd|gesdd|geev)")
+
+
+def _refuse_cpu_lapack(prog, args, mesh):
+    """Refuse, before anything runs, a program that calls a LAPACK factorisation when the mesh spans several CPU
+    devices. jaxlib runs a batched factorisation (e.g. the radial disk's per-cell LU) by fanning it out on the host
+    thread pool that the emulated CPU devices themselves occupy; with several devices the device threads wait for
+    each other's queued work and the program hangs (measured: 4 devices, (400, 120, 120) ``jnp.linalg.solve``;
+    docs/design_notes.md, radial disk). A clear error beats a silent hang."""
+    devs = list(mesh.devices.flat)
+    if len(devs) < 2 or not all(d.platform == "cpu" for d in devs):
+        return
+    found = sorted({m.group(0) for m in _LAPACK_FACTOR.finditer(prog.lower(*args).as_text())})
+    if found:
+        raise JaxcoagInputError(
+            f"this sweep calls LAPACK factorisations on the CPU ({', '.join(found)}) and is sharded over "
+            f"{len(devs)} CPU devices: jaxlib's batched LAPACK deadlocks across several CPU devices of one host. "
+            f"Run it unsharded (drop devices=/mesh=; the vmapped batch already uses the cores) or shard over one "
+            f"CPU device (devices=jax.devices()[:1]) or over accelerators.")
+
+
 def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attrs=None, invalid="raise",
-          progress=False, edges=None):
+          progress=False, edges=None, dims=None):
     """Evaluate ``fn(**point)`` over a parameter grid in one vmapped (optionally sharded) program.
 
     Arguments:
@@ -343,6 +388,9 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         edges: mass-bin edges [g] (1-D increasing) of the binned view when fn returns an engine
             result; default None = the engine's own bins (the binned grid). Needed for Monte Carlo
             results, whose automatic bins depend on the data.
+        dims: dict output name -> sequence of dimension names for that output's axes beyond the parameters
+            (e.g. ``{"sigma_dust": ("t", "r")}`` for a (T, Nr) output); outputs not named keep the default
+            names. A name may be shared by several outputs (their lengths must agree) but not by a parameter.
 
     Returns:
         xarray.Dataset with the parameters as coordinates, the outputs as variables (extra
@@ -391,6 +439,18 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
             raise JaxcoagInputError("edges must be a 1-D, positive, strictly increasing array of >= 2 mass-bin edges "
                                     "in g (or a MassGrid).")
         edges = tuple(float(x) for x in e)
+    if dims is not None:
+        if not isinstance(dims, dict) or not all(isinstance(k, str) for k in dims):
+            raise JaxcoagInputError("dims must be a dict: output name -> sequence of dimension names, e.g. "
+                                    "{'sigma_dust': ('t', 'r')}.")
+        dims = {k: (v,) if isinstance(v, str) else tuple(v) for k, v in dims.items()}
+        for k, v in dims.items():
+            if not all(isinstance(d, str) and d for d in v):
+                raise JaxcoagInputError(f"dims[{k!r}] must be a sequence of non-empty strings; got {v!r}.")
+            if len(set(v)) != len(v) or set(v) & set(names) or (grid == "zip" and "member" in v):
+                raise JaxcoagInputError(f"dims[{k!r}] = {v!r} repeats a name or reuses a parameter's dimension "
+                                        f"({', '.join(names) if grid == 'outer' else 'member'}); rename it.")
+        _check_dims(dims, fn, names, cols, edges)
     out, meta = _run(fn, names, cols, chunk, mesh, progress, edges)
     if bad.any():
         from ._status import RESULT_NAMES
@@ -417,12 +477,14 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
             continue
         extra = v.ndim - len(shape)
         if result and k in ("mass_per_bin", "number_per_bin"):
-            dims = pdims + ("t", "m")
+            d = pdims + ("t", "m")
         elif result and k in ("gel_mass", "mass_drift"):
-            dims = pdims + ("t",)
+            d = pdims + ("t",)
+        elif dims is not None and k in dims:
+            d = pdims + dims[k]
         else:
-            dims = pdims + tuple(f"{k}_dim{i}" for i in range(extra))
-        data[k] = (dims, v)
+            d = pdims + tuple(f"{k}_dim{i}" for i in range(extra))
+        data[k] = (d, v)
     table = result_table()
     codes = sorted(table)
     status_attrs = {"long_name": "jaxcoag.RESULTS code per member (0 = successful)", "units": "1",

@@ -154,6 +154,68 @@ def test_sharded_equals_unsharded_subprocess():
     assert out["diff_b"] <= 1e-14 and out["diff_c"] <= 1e-14
 
 
+def _profile(a, b):
+    """A (3, 2) 'time x radius' output and a (3,) one, in closed form."""
+    return {"x": a * jnp.arange(6.0).reshape(3, 2) + b, "y": a * jnp.arange(3.0)}
+
+
+def test_dims_name_the_output_axes():
+    """dims= names the axes beyond the parameters (values unchanged); outputs not named keep <name>_dim<i>."""
+    ds = sweep(_profile, {"a": [1.0, 2.0], "b": [0.0, 5.0, 7.0]}, dims={"x": ("t", "r"), "y": "t"})
+    assert ds["x"].dims == ("a", "b", "t", "r") and ds["y"].dims == ("a", "b", "t")
+    np.testing.assert_array_equal(ds["x"].values[1, 2], 2.0 * np.arange(6.0).reshape(3, 2) + 7.0)
+    np.testing.assert_array_equal(ds["y"].values[1, 0], [0.0, 2.0, 4.0])
+    z = sweep(_profile, {"a": [1.0], "b": [0.0]}, grid="zip", dims={"y": ("t",)})
+    assert z["y"].dims == ("member", "t") and z["x"].dims == ("member", "x_dim0", "x_dim1")
+
+
+@pytest.mark.parametrize("dims, match", [
+    ({"x": ("t",)}, "names 1 axes but output 'x' has 2"),
+    ({"z": ("t",)}, "does not return; its outputs are status, x, y"),
+    ({"x": ("a", "r")}, "reuses a parameter"),
+    ({"x": ("t", "t")}, "repeats a name"),
+    ({"x": ("t", "r"), "y": "r"}, "length 2 in output 'x' but 3 in 'y'"),
+    (["x"], "dims must be a dict"),
+    ({"x": ("t", "")}, "non-empty strings"),
+])
+def test_dims_bad_input(dims, match):
+    with pytest.raises(JaxcoagInputError, match=match):
+        sweep(_profile, {"a": [1.0, 2.0], "b": [0.0]}, dims=dims)
+    with pytest.raises(JaxcoagInputError, match="engine result already has named axes|already have named axes"):
+        sweep(box, {"k0": [1.0], "t_end": [1.0]}, dims={"mass_per_bin": ("t", "m")})
+
+
+LAPACK_SCRIPT = textwrap.dedent("""
+    import os
+    os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
+    import jax, jax.numpy as jnp
+    jax.config.update("jax_enable_x64", True)
+    from jaxcoag.sweep import sweep
+    from jaxcoag._validate import JaxcoagInputError
+
+    def f(a):  # one LU per member: jaxlib's batched getrf under vmap
+        return jnp.linalg.solve(jnp.eye(120) * a + 0.1, jnp.ones(120))
+
+    ok = sweep(f, {"a": [2.0, 3.0]}, devices=jax.devices()[:1])  # one CPU device: runs
+    try:
+        sweep(f, {"a": [2.0, 3.0]}, devices=jax.devices())
+        print("NOT REFUSED")
+    except JaxcoagInputError as e:
+        print("REFUSED", e, float(ok["value"].values[0, 0]))
+""")
+
+
+def test_several_cpu_devices_refused_for_lapack_programs():
+    """A sweep whose program calls LAPACK factorisations is refused, before it runs, over several CPU devices
+    (jaxlib's batched LU deadlocks there: docs/design_notes.md); over one CPU device it runs."""
+    env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=ROOT)
+    r = subprocess.run([sys.executable, "-c", LAPACK_SCRIPT], capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    line = [x for x in r.stdout.splitlines() if x.startswith(("REFUSED", "NOT REFUSED"))][-1]
+    assert line.startswith("REFUSED") and "lapack_dgetrf" in line and "2 CPU devices" in line
+    assert abs(float(line.split()[-1]) - 1.0 / 14.0) < 1e-14  # (2 I + 0.1 J) x = 1: x = 1 / (2 + 0.1 * 120)
+
+
 def test_invalid_flag_marks_only_the_bad_members(ds):
     """invalid='flag': a NaN parameter value flags its members; every other member is unchanged."""
     bad = sweep(box, {"k0": [0.5, np.nan, 2.0], "t_end": [1.0, 10.0, 1e8]}, invalid="flag")

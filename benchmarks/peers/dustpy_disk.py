@@ -15,10 +15,15 @@ surface density), and a_peak(r) (bin index of the most massive bin per cell; the
 in bins over the interior cells). Speed is reported as the ratio DustPy wall / jaxcoag wall on the
 same machine in the same run.
 
+``--modes replay`` runs the parity step with DustPy's own steps (recorded in its run: the time at the start of
+every step): the same discrete system with the same step sequence, so that the differences left are round-off and
+not the step rule's. Free-running parity takes its steps from DustPy's rule (a minimum over every cell and bin),
+so round-off in nearly empty cells can move a step and the two runs' step sequences part after some thousand steps.
+
 ``--write-reference``: writes DustPy's ``ci`` snapshots to ``tests/data/dustpy_disk_ref.npz`` (the
 parity test ``tests/test_disk.py`` compares against it; DustPy is not needed there).
 
-Run: ``python benchmarks/peers/dustpy_disk.py [--setup ci|default] [--t-end-yr T] [--modes parity,split]
+Run: ``python benchmarks/peers/dustpy_disk.py [--setup ci|default] [--t-end-yr T] [--modes parity,split,replay]
 [--write-reference] [--dustpy-cache FILE.npz]``. Writes ``benchmarks/results/dustpy_disk_<setup>.json``.
 
 References: Stammler & Birnstiel (2022) ApJ 935, 35 (DustPy).
@@ -61,10 +66,12 @@ def run_dustpy(setup, t_yr):
     sim.writer = None
     sim.verbosity = 0
     count = {"n": 0}
+    step_t = []  # the time at the start of every step [s] (its steps: their differences; the replay mode's input)
     integrate = sim.integrator.integrate
 
     def counted():
         count["n"] += 1
+        step_t.append(float(sim.t))
         return integrate()
 
     sim.integrator.integrate = counted
@@ -81,7 +88,7 @@ def run_dustpy(setup, t_yr):
         out["sigma_gas"].append(np.array(sim.gas.Sigma))
         out["steps"].append(count["n"])
     res = {k: np.asarray(v) for k, v in out.items()}
-    res.update(wall=wall, r=np.array(sim.grid.r), ri=np.array(sim.grid.ri), m=np.array(sim.grid.m),
+    res.update(wall=wall, step_t=np.asarray(step_t), r=np.array(sim.grid.r), ri=np.array(sim.grid.ri), m=np.array(sim.grid.m),
                area=np.array(sim.grid.A), a=np.array(sim.dust.a[0]))
     return res
 
@@ -113,6 +120,59 @@ def run_jaxcoag(setup, t_yr, mode):
     return {"t": np.asarray(res.t), "sigma_dust": np.asarray(res.sigma_dust), "sigma_gas": np.asarray(res.sigma_gas),
             "steps": np.asarray(res.n_steps), "wall": wall, "compile": t_compile,
             "status": jaxcoag.status_names(res.status), "split_error": np.asarray(res.split_error),
+            "maxrss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+
+
+def run_replay(setup, ref):
+    """jaxcoag's parity step (``jaxcoag.disk.solve.step``) driven by DustPy's own step sequence (the differences of
+    ``ref["step_t"]``, DustPy's time at the start of each step, and the last snapshot): the same discrete system
+    with the same steps, so what is left is round-off, not the step rule's choices. Snapshots are taken after the
+    step counts DustPy had at its snapshots. Returns a dict as :func:`run_jaxcoag`."""
+    import jax
+    import jax.numpy as jnp
+
+    jax.config.update("jax_enable_x64", True)
+    from jaxcoag import disk
+    from jaxcoag._status import RESULT_NAMES  # DiskState.status holds the code
+    from jaxcoag.disk.solve import step
+
+    if "step_t" not in ref:
+        raise SystemExit("replay needs DustPy's step times: this --dustpy-cache was written without them; delete it")
+    model = disk.dustpy_default(**(dict(nr=30, m_max=1e2) if setup == "ci" else {}))
+    mode = disk.Parity()
+    s0 = disk.solve(model, np.asarray([0.0]), mode=mode).final_state
+    dts = np.diff(np.append(ref["step_t"], ref["t"][-1]))
+    snap = np.asarray(ref["steps"], np.int64)  # steps taken at each snapshot (0 at t = 0)
+    if dts.size != snap[-1] or np.any(dts <= 0):
+        raise SystemExit(f"DustPy's step record is inconsistent ({dts.size} steps, {snap[-1]} counted)")
+
+    @jax.jit
+    def go(s0, dts):
+        sd0 = jnp.zeros((snap.size,) + s0.sigma_dust.shape).at[0].set(s0.sigma_dust)
+        sg0 = jnp.zeros((snap.size,) + s0.sigma_gas.shape).at[0].set(s0.sigma_gas)
+
+        def body(c, dt):
+            s, sd, sg = c
+            s = step(model, mode, s, dt)
+            k = jnp.searchsorted(jnp.asarray(snap), s.n_steps)  # the snapshot this step count is, if any
+            hit = jnp.asarray(snap)[jnp.minimum(k, snap.size - 1)] == s.n_steps
+            k = jnp.where(hit, k, 0)
+            sd = sd.at[k].set(jnp.where(hit, s.sigma_dust, sd[k]))
+            sg = sg.at[k].set(jnp.where(hit, s.sigma_gas, sg[k]))
+            return (s, sd, sg), None
+
+        (s, sd, sg), _ = jax.lax.scan(body, (s0, sd0, sg0), dts)
+        return s, sd, sg
+
+    t0 = time.perf_counter()
+    compiled = go.lower(s0, dts).compile()
+    t_compile = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    s, sd, sg = jax.block_until_ready(compiled(s0, dts))
+    wall = time.perf_counter() - t0
+    return {"t": np.asarray(ref["t"]), "sigma_dust": np.asarray(sd), "sigma_gas": np.asarray(sg), "steps": snap,
+            "wall": wall, "compile": t_compile, "status": [RESULT_NAMES[int(s.status)]] * snap.size,
+            "split_error": np.zeros(snap.shape),
             "maxrss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
@@ -152,7 +212,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--setup", choices=("ci", "default"), default="ci")
     ap.add_argument("--t-end-yr", type=float, default=None)
-    ap.add_argument("--modes", default="parity,split")
+    ap.add_argument("--modes", default="parity,split", help="comma-separated: parity, split, replay (the parity "
+                    "step driven by DustPy's own step sequence)")
     ap.add_argument("--write-reference", action="store_true")
     ap.add_argument("--dustpy-cache", default=None, help="npz file: DustPy's snapshots are read from it when it "
                     "exists (DustPy is not run again) and written to it otherwise")
@@ -187,7 +248,7 @@ def main(argv=None):
     print(f"{'mode':8s} {'compile s':>9s} {'run s':>8s} {'steps':>7s} {'DustPy/ours':>11s} {'dMdust':>9s} "
           f"{'dSigma_d':>9s} {'dSigma_g':>9s} {'a_peak bins':>11s}")
     for mode in [s for s in args.modes.split(",") if s]:
-        ours = run_jaxcoag(args.setup, t_yr, mode)
+        ours = run_replay(args.setup, ref) if mode == "replay" else run_jaxcoag(args.setup, t_yr, mode)
         rows = compare(ours, ref, ref["area"], ref["a"])
         worst = {k: max(r[k] for r in rows) for k in ("dust_mass_rel", "sigma_dust_rel_max", "sigma_gas_rel_max",
                                                         "a_peak_bins_max", "sigma_dust_l1_mass_weighted",
