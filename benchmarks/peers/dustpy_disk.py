@@ -20,10 +20,13 @@ every step): the same discrete system with the same step sequence, so that the d
 not the step rule's. Free-running parity takes its steps from DustPy's rule (a minimum over every cell and bin),
 so round-off in nearly empty cells can move a step and the two runs' step sequences part after some thousand steps.
 
+``--modes perturbed`` measures that sensitivity on our side alone: one compiled parity solve run from the initial
+state and from it with every populated dust bin perturbed by 1e-15 (relative), the two compared as above.
+
 ``--write-reference``: writes DustPy's ``ci`` snapshots to ``tests/data/dustpy_disk_ref.npz`` (the
 parity test ``tests/test_disk.py`` compares against it; DustPy is not needed there).
 
-Run: ``python benchmarks/peers/dustpy_disk.py [--setup ci|default] [--t-end-yr T] [--modes parity,split,replay]
+Run: ``python benchmarks/peers/dustpy_disk.py [--setup ci|default] [--t-end-yr T] [--modes parity,split,replay,perturbed]
 [--write-reference] [--dustpy-cache FILE.npz]``. Writes ``benchmarks/results/dustpy_disk_<setup>.json``.
 
 References: Stammler & Birnstiel (2022) ApJ 935, 35 (DustPy).
@@ -176,6 +179,38 @@ def run_replay(setup, ref):
             "maxrss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
+def run_perturbed(setup, t_yr, eps=1e-15):
+    """The round-off sensitivity of the parity run: one compiled parity solve run twice, from the initial state and
+    from it with every populated dust bin multiplied by 1 +- eps (alternating signs). Returns (unperturbed,
+    perturbed) dicts as :func:`run_jaxcoag`; comparing them with :func:`compare` shows how far two runs of the
+    same discrete system part when only round-off separates them."""
+    import jax
+    import jax.numpy as jnp
+
+    jax.config.update("jax_enable_x64", True)
+    from jaxcoag import disk
+
+    model = disk.dustpy_default(**(dict(nr=30, m_max=1e2) if setup == "ci" else {}))
+    p = model.initial()
+    sd = p.sigma_dust
+    sign = jnp.where(jnp.arange(sd.size).reshape(sd.shape) % 2 == 0, 1.0, -1.0)
+    sd_p = jnp.where(sd > model.floor_dust(), sd * (1.0 + eps * sign), sd)
+    t_out = np.asarray(t_yr) * YR
+
+    @jax.jit
+    def go(sd):
+        return disk.solve(model, t_out, initial=disk.DiskProfile(p.sigma_gas, sd), throw=False)
+
+    out = []
+    for x in (sd, sd_p):
+        t0 = time.perf_counter()
+        res = jax.block_until_ready(go(x))
+        out.append({"t": np.asarray(res.t), "sigma_dust": np.asarray(res.sigma_dust), "r": np.asarray(model.r),
+                    "sigma_gas": np.asarray(res.sigma_gas), "steps": np.asarray(res.n_steps),
+                    "wall": time.perf_counter() - t0})
+    return out
+
+
 def compare(ours, ref, area, a):
     """Differences of ours against DustPy at every snapshot (see the module docstring)."""
     rows = []
@@ -213,7 +248,8 @@ def main(argv=None):
     ap.add_argument("--setup", choices=("ci", "default"), default="ci")
     ap.add_argument("--t-end-yr", type=float, default=None)
     ap.add_argument("--modes", default="parity,split", help="comma-separated: parity, split, replay (the parity "
-                    "step driven by DustPy's own step sequence)")
+                    "step driven by DustPy's own step sequence), perturbed (the parity run against itself from an "
+                    "initial state perturbed by 1e-15)")
     ap.add_argument("--write-reference", action="store_true")
     ap.add_argument("--dustpy-cache", default=None, help="npz file: DustPy's snapshots are read from it when it "
                     "exists (DustPy is not run again) and written to it otherwise")
@@ -248,6 +284,26 @@ def main(argv=None):
     print(f"{'mode':8s} {'compile s':>9s} {'run s':>8s} {'steps':>7s} {'DustPy/ours':>11s} {'dMdust':>9s} "
           f"{'dSigma_d':>9s} {'dSigma_g':>9s} {'a_peak bins':>11s}")
     for mode in [s for s in args.modes.split(",") if s]:
+        if mode == "perturbed":
+            base, pert = run_perturbed(args.setup, t_yr)
+            rows = compare(pert, base, ref["area"], ref["a"])
+            rows_dp = compare(base, ref, ref["area"], ref["a"])
+            keys = ("dust_mass_rel", "sigma_dust_rel_max", "sigma_gas_rel_max", "a_peak_bins_max",
+                    "sigma_gas_rel_max_dusty_cells")
+            print(f"perturbed: the parity run from the initial dust x (1 +- 1e-15) against the same program's "
+                  f"unperturbed run ({int(pert['steps'][-1])} and {int(base['steps'][-1])} steps; DustPy "
+                  f"{int(ref['steps'][-1])}); columns: unperturbed vs DustPy / perturbed vs unperturbed")
+            print(f"{'t_yr':>8s} " + " ".join(f"{k[:21]:>21s}" for k in keys))
+            for rs, rd in zip(rows, rows_dp):
+                print(f"{rs['t_yr']:8.0f} " + " ".join(f"{rd[k]:10.2e}/{rs[k]:10.2e}" for k in keys))
+            report["jaxcoag"]["perturbed"] = {"eps": 1e-15, "steps": pert["steps"].tolist(),
+                                              "steps_unperturbed": base["steps"].tolist(),
+                                              "per_snapshot_vs_unperturbed": rows,
+                                              "per_snapshot_unperturbed_vs_dustpy": rows_dp,
+                                              "worst_vs_unperturbed": {k: max(r[k] for r in rows) for k in keys},
+                                              "worst_unperturbed_vs_dustpy": {k: max(r[k] for r in rows_dp)
+                                                                              for k in keys}}
+            continue
         ours = run_replay(args.setup, ref) if mode == "replay" else run_jaxcoag(args.setup, t_yr, mode)
         rows = compare(ours, ref, ref["area"], ref["a"])
         worst = {k: max(r[k] for r in rows) for k in ("dust_mass_rel", "sigma_dust_rel_max", "sigma_gas_rel_max",

@@ -1,0 +1,223 @@
+"""Gradients of 1e5-yr radial-disk outcomes, forward and reverse mode, against finite differences.
+
+Model: DustPy's default disk (``jaxcoag.disk.dustpy_default``; Stammler & Birnstiel 2022 §3) on the benchmark's
+``ci`` grid (Nr = 30, m_max = 1e2 g; ``--setup default``: Nr = 100, Nm = 120), parity mode (``--mode split``:
+the Strang-split step), evolved to ``--t-end-yr`` (default 1e5 yr).
+
+Outcomes y (at t_end): the dust mass left in the disk [M_earth] (interior cells), the dust mass of the ring
+10-30 au [M_earth], and ln a_mean at the cell nearest 10 au (mass-weighted geometric mean particle radius,
+``DiskResult.a_mean``; ln cm). Parameters x = ln(alpha, v_frag, M_disk, r_c).
+
+* ``forward``: ``jax.jacfwd`` through ``disk.solve`` (``lax.while_loop``, adaptive steps);
+* ``reverse``: ``jax.jacrev`` through ``disk.solve(loop="scan")`` (``max_steps`` = the base run's step count
+  + 8 guarded steps, each checkpointed);
+* ``fd``: central differences with step h in x of the same outcomes computed by scanning
+  ``jaxcoag.disk.solve.step`` over the base run's step sequence. The step-size rule (DustPy's: a minimum over
+  cells and bins) is not differentiated, so the derivative is that of the map with the steps held fixed;
+  differences of free-running solves would also see the perturbed runs choose other steps.
+
+The base step sequence is recorded by a scan that applies the solver's rule (dt = min(cfl rate, t_end - t)) and
+checked against the adaptive solve's final state. Reported: the three Jacobians, the largest relative differences
+forward vs fd and reverse vs forward, wall times (compile apart), and XLA's memory analysis of the compiled
+forward and reverse programs (temporary buffers: the peak working memory beyond inputs and outputs).
+
+    python benchmarks/disk_gradients.py [--setup ci|default] [--mode parity|split] [--t-end-yr 1e5] [--h 1e-4]
+    python benchmarks/disk_gradients.py --setup default --memory-only 4000   # compile only: peak working memory
+
+Writes ``benchmarks/results/disk_gradients_<setup>_<mode>.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import resource
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from benchmarks import _common as C
+from jaxcoag import disk
+from jaxcoag.disk.solve import step
+
+K = disk.gas.DUSTPY_CONSTANTS
+M_EARTH = 5.9722e27  # g
+NAMES = ("alpha", "v_frag", "M_disk", "r_c")
+OUTCOMES = ("M_dust [M_earth]", "M_ring 10-30 au [M_earth]", "ln a_mean(10 au) [ln cm]")
+
+
+def build(setup, x):
+    grid = dict(nr=30, m_max=1e2) if setup == "ci" else {}
+    a, vf, md, rc = jnp.exp(x)
+    return disk.dustpy_default(**grid, alpha=a, v_frag=vf, m_disk=md, r_c=rc)
+
+
+def cells(model):
+    """Concrete cell selections of a model's grid (which does not depend on x): interior, the 10-30 au ring, and
+    the index of the cell nearest 10 au."""
+    r_au = np.asarray(model.r) / K["au"]
+    interior = np.zeros(r_au.shape, bool)
+    interior[1:-1] = True
+    return interior, interior & (r_au >= 10.0) & (r_au <= 30.0), int(np.argmin(np.abs(r_au - 10.0)))
+
+
+def outcomes(model, sigma_dust, sel):
+    """(3,) outcomes of a (nr, nm) Sigma_d [g cm^-2] (see the module docstring); ``sel`` from :func:`cells`."""
+    interior, ring, i10 = sel
+    tot = sigma_dust.sum(-1)
+    lna = jnp.sum(sigma_dust[i10] * jnp.log(model.particle_size())) / jnp.sum(sigma_dust[i10])
+    return jnp.stack([jnp.sum(jnp.where(interior, tot * model.area, 0.0)) / M_EARTH,
+                      jnp.sum(jnp.where(ring, tot * model.area, 0.0)) / M_EARTH, lna])
+
+
+def memory_only(args, mode, t_out, x0, sel):
+    """Compile (do not run) the forward solve and the reverse-mode gradient of the dust mass; report XLA's memory
+    analysis (bytes of arguments, outputs and temporaries: the temporaries are the working memory beyond them)."""
+    def fwd(x):
+        m = build(args.setup, x)
+        return outcomes(m, disk.solve(m, t_out, mode=mode, throw=False).sigma_dust[-1], sel)[0]
+
+    def rev(x):
+        m = build(args.setup, x)
+        res = disk.solve(m, t_out, mode=mode, loop="scan", max_steps=args.memory_only, throw=False)
+        return outcomes(m, res.sigma_dust[-1], sel)[0]
+
+    report = {"setup": args.setup, "mode": args.mode, "t_end_yr": args.t_end_yr, "scan_steps": args.memory_only,
+              "machine": C.machine_info()}
+    for name, fn in (("forward", fwd), ("reverse_grad", jax.grad(rev))):
+        t0 = time.perf_counter()
+        mem = jax.jit(fn).lower(x0).compile().memory_analysis()
+        report[name] = {"compile_s": time.perf_counter() - t0,
+                        **{k: getattr(mem, k + "_in_bytes") / 2**20 for k in ("argument_size", "output_size",
+                                                                              "temp_size", "generated_code_size")}}
+        print(f"{name:13s} compile {report[name]['compile_s']:.1f} s, temporaries {report[name]['temp_size']:.1f} MiB "
+              f"(arguments {report[name]['argument_size']:.3f}, outputs {report[name]['output_size']:.3f} MiB)",
+              flush=True)
+    out = ROOT / "benchmarks" / "results" / f"disk_gradients_memory_{args.setup}_{args.mode}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=1))
+    print(f"wrote {out}")
+    return report
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--setup", choices=("ci", "default"), default="ci")
+    ap.add_argument("--mode", choices=("parity", "split"), default="parity")
+    ap.add_argument("--t-end-yr", type=float, default=1e5)
+    ap.add_argument("--h", type=float, default=1e-4, help="finite-difference step in the log parameters")
+    ap.add_argument("--memory-only", type=int, default=None, metavar="N_STEPS",
+                    help="compile only (nothing runs): XLA's memory analysis of the forward solve and of the "
+                         "reverse-mode gradient of the dust mass (jax.grad, loop='scan' with N_STEPS guarded steps)")
+    args = ap.parse_args(argv)
+    mode = disk.Parity() if args.mode == "parity" else disk.Split()
+    t_end = args.t_end_yr * K["year"]
+    t_out = jnp.array([0.0, t_end])
+    x0 = jnp.log(jnp.array([1e-3, 100.0, 0.05 * K["M_sun"], 60.0 * K["au"]]))  # DustPy's defaults
+    timings = {}
+    sel = cells(build(args.setup, x0))
+    if args.memory_only is not None:
+        return memory_only(args, mode, t_out, x0, sel)
+
+    def timed(name, fn, *a):
+        t0 = time.perf_counter()
+        c = jax.jit(fn).lower(*a).compile()
+        timings[name + "_compile_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(c(*a))
+        timings[name + "_s"] = time.perf_counter() - t0
+        mem = c.memory_analysis()
+        if mem is not None:
+            timings[name + "_temp_mib"] = mem.temp_size_in_bytes / 2**20
+        return out
+
+    def forward(x):
+        m = build(args.setup, x)
+        res = disk.solve(m, t_out, mode=mode, throw=False)
+        return outcomes(m, res.sigma_dust[-1], sel), res.n_steps[-1], res.final_state
+
+    y0, n_steps, s_end = timed("forward", forward, x0)
+    n = int(n_steps)
+    print(f"{args.setup} grid, {args.mode} mode, {args.t_end_yr:g} yr: {n} steps, forward {timings['forward_s']:.1f} s "
+          f"(compile {timings['forward_compile_s']:.1f} s)", flush=True)
+
+    def record(x):
+        """The solver's step sequence by its rule, in a scan of n steps (and the final state, to check it)."""
+        m = build(args.setup, x)
+        s0 = disk.solve(m, jnp.array([0.0]), mode=mode).final_state
+
+        def body(s, _):
+            dt = jnp.minimum(s.dt_next, t_end - s.t)
+            s = step(m, mode, s, dt)
+            s = eqx.tree_at(lambda q: q.t, s, jnp.where(t_end - s.t <= 1e-12 * t_end, t_end, s.t))  # as the solver
+            return s, dt
+
+        return jax.lax.scan(body, s0, None, length=n)
+
+    s_rec, dts = jax.jit(record)(x0)
+    rec_diff = float(jnp.max(jnp.abs(s_rec.sigma_dust - s_end.sigma_dust) / jnp.maximum(s_end.sigma_dust, 1e-300)))
+    print(f"recorded step sequence: final time {float(s_rec.t) / K['year']:.6g} yr, max rel. difference of Sigma_d "
+          f"from the adaptive solve {rec_diff:.2e}", flush=True)
+
+    def pinned(x):
+        m = build(args.setup, x)
+        s0 = disk.solve(m, jnp.array([0.0]), mode=mode).final_state
+        s, _ = jax.lax.scan(lambda s, dt: (step(m, mode, s, dt), None), s0, dts)
+        return outcomes(m, s.sigma_dust, sel)
+
+    J_fwd = timed("jacfwd", jax.jacfwd(lambda x: forward(x)[0]), x0)
+
+    def reverse_y(x):
+        m = build(args.setup, x)
+        res = disk.solve(m, t_out, mode=mode, loop="scan", max_steps=n + 8, throw=False)
+        return outcomes(m, res.sigma_dust[-1], sel)
+
+    J_rev = timed("jacrev", jax.jacrev(reverse_y), x0)
+    pin = jax.jit(pinned).lower(x0).compile()
+    t0 = time.perf_counter()
+    J_fd = np.zeros((3, 4))
+    for k in range(4):
+        e = jnp.zeros(4).at[k].set(args.h)
+        J_fd[:, k] = (np.asarray(pin(x0 + e)) - np.asarray(pin(x0 - e))) / (2 * args.h)
+    timings["fd_8_runs_s"] = time.perf_counter() - t0
+    y_pin = np.asarray(pin(x0))
+
+    J_fwd, J_rev = np.asarray(J_fwd), np.asarray(J_rev)
+    scale = np.maximum(np.abs(J_fd), 1e-6 * np.max(np.abs(J_fd), axis=1, keepdims=True))
+    rel_fwd_fd = np.abs(J_fwd - J_fd) / scale
+    rel_rev_fwd = np.abs(J_rev - J_fwd) / scale
+    print(f"outcomes at {args.t_end_yr:g} yr: " + ", ".join(f"{o} = {v:.6g}" for o, v in zip(OUTCOMES, np.asarray(y0)))
+          + f" (pinned-step recomputation differs by {np.max(np.abs(y_pin / np.asarray(y0) - 1)):.1e})")
+    print(f"{'d y / d ln x':28s} " + " ".join(f"{p:>26s}" for p in NAMES))
+    for i, o in enumerate(OUTCOMES):
+        print(f"{o:28s} " + " ".join(f"{J_fwd[i, k]:12.5e} ({rel_fwd_fd[i, k]:.0e},{rel_rev_fwd[i, k]:.0e})"
+                                     for k in range(4)))
+    print("(in brackets: |forward - fd| / |fd| and |reverse - forward| / |fd|)")
+    print(f"max rel. difference forward vs fd {rel_fwd_fd.max():.2e}, reverse vs forward {rel_rev_fwd.max():.2e}")
+    print("  ".join(f"{k} {v:.1f}" for k, v in timings.items()))
+    report = {"setup": args.setup, "mode": args.mode, "t_end_yr": args.t_end_yr, "h": args.h, "steps": n,
+              "parameters": [f"ln {p}" for p in NAMES], "outcomes": list(OUTCOMES), "y": np.asarray(y0).tolist(),
+              "jac_forward": J_fwd.tolist(), "jac_reverse": J_rev.tolist(), "jac_fd_pinned_steps": J_fd.tolist(),
+              "max_rel_forward_vs_fd": float(rel_fwd_fd.max()), "max_rel_reverse_vs_forward": float(rel_rev_fwd.max()),
+              "recorded_steps_rel_diff": rec_diff, "timings": timings,
+              "maxrss_mib_process": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+              "machine": C.machine_info()}
+    out = ROOT / "benchmarks" / "results" / f"disk_gradients_{args.setup}_{args.mode}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=1))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
