@@ -22,6 +22,7 @@ forward vs fd and reverse vs forward, wall times (compile apart), and XLA's memo
 forward and reverse programs (temporary buffers: the peak working memory beyond inputs and outputs).
 
     python benchmarks/disk_gradients.py [--setup ci|default] [--mode parity|split] [--t-end-yr 1e5] [--h 1e-4]
+    python benchmarks/disk_gradients.py --t-end-yr 1e5 --directional    # one direction: a quarter of the cost
     python benchmarks/disk_gradients.py --setup default --memory-only 4000   # compile only: peak working memory
 
 Writes ``benchmarks/results/disk_gradients_<setup>_<mode>.json``.
@@ -111,6 +112,65 @@ def memory_only(args, mode, t_out, x0, sel):
     return report
 
 
+def directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec_diff):
+    """The cheaper check (``--directional``): one direction d through all four ln-parameters. Forward: one
+    ``jax.jvp`` (J d, three outcomes); reverse: one ``jax.grad`` of the weighted sum c . y (c = 1/y for the masses,
+    1 for ln a_mean), dotted with d; finite differences: two pinned-step runs along d."""
+    d = jnp.array([0.3, -0.5, 0.7, 0.4])
+    y0 = np.asarray(y0)
+    c = jnp.array([1.0 / y0[0], 1.0 / y0[1], 1.0])
+
+    def reverse_c(x):
+        m = build(args.setup, x)
+        res = disk.solve(m, t_out, mode=mode, loop="scan", max_steps=n + 8, throw=False)
+        return jnp.dot(c, outcomes(m, res.sigma_dust[-1], sel))
+
+    def timed(name, fn, *a):
+        t0 = time.perf_counter()
+        comp = jax.jit(fn).lower(*a).compile()
+        timings[name + "_compile_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(comp(*a))
+        timings[name + "_s"] = time.perf_counter() - t0
+        mem = comp.memory_analysis()
+        if mem is not None:
+            timings[name + "_temp_mib"] = mem.temp_size_in_bytes / 2**20
+        return out
+
+    jv = np.asarray(timed("jvp", lambda x: jax.jvp(lambda z: forward(z)[0], (x,), (d,))[1], x0))
+    print(f"jvp {timings['jvp_s']:.1f} s", flush=True)
+    g = np.asarray(timed("grad", jax.grad(reverse_c), x0))
+    print(f"grad {timings['grad_s']:.1f} s", flush=True)
+    pin = jax.jit(pinned).lower(x0).compile()
+    t0 = time.perf_counter()
+    fd = (np.asarray(pin(x0 + args.h * d)) - np.asarray(pin(x0 - args.h * d))) / (2 * args.h)
+    timings["fd_2_runs_s"] = time.perf_counter() - t0
+    y_pin = np.asarray(pin(x0))
+    rel_fwd_fd = np.abs(jv - fd) / np.abs(fd)
+    rev_dir, fwd_dir = float(g @ np.asarray(d)), float(np.asarray(c) @ jv)
+    rel_rev_fwd = abs(rev_dir - fwd_dir) / abs(fwd_dir)
+    print(f"outcomes at {args.t_end_yr:g} yr: " + ", ".join(f"{o} = {v:.6g}" for o, v in zip(OUTCOMES, y0))
+          + f" (pinned-step recomputation differs by {np.max(np.abs(y_pin / y0 - 1)):.1e})")
+    for i, o in enumerate(OUTCOMES):
+        print(f"d {o:28s} / d ln x . d: forward {jv[i]:.8e}  fd {fd[i]:.8e}  rel. difference {rel_fwd_fd[i]:.1e}")
+    print(f"c . J d: reverse {rev_dir:.10e}  forward {fwd_dir:.10e}  rel. difference {rel_rev_fwd:.1e}; reverse "
+          f"gradient of c . y: {g.tolist()}")
+    print("  ".join(f"{k} {v:.1f}" for k, v in timings.items()))
+    report = {"setup": args.setup, "mode": args.mode, "t_end_yr": args.t_end_yr, "h": args.h, "steps": n,
+              "direction_ln_params": np.asarray(d).tolist(), "parameters": [f"ln {p}" for p in NAMES],
+              "outcomes": list(OUTCOMES), "y": y0.tolist(), "jvp": jv.tolist(), "fd_pinned_steps": fd.tolist(),
+              "rel_forward_vs_fd": rel_fwd_fd.tolist(), "weights_c": np.asarray(c).tolist(),
+              "grad_reverse_c_dot_y": g.tolist(), "rel_reverse_vs_forward": rel_rev_fwd,
+              "recorded_steps_rel_diff": rec_diff, "pinned_outcome_rel_diff": float(np.max(np.abs(y_pin / y0 - 1))),
+              "timings": timings, "maxrss_mib_process": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+              "machine": C.machine_info()}
+    out = ROOT / "benchmarks" / "results" / f"disk_gradients_{args.setup}_{args.mode}_directional.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=1))
+    print(f"wrote {out}")
+    return report
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--setup", choices=("ci", "default"), default="ci")
@@ -120,6 +180,9 @@ def main(argv=None):
     ap.add_argument("--memory-only", type=int, default=None, metavar="N_STEPS",
                     help="compile only (nothing runs): XLA's memory analysis of the forward solve and of the "
                          "reverse-mode gradient of the dust mass (jax.grad, loop='scan' with N_STEPS guarded steps)")
+    ap.add_argument("--directional", action="store_true",
+                    help="one direction through the four parameters instead of the full Jacobians (one jvp, one "
+                         "reverse gradient, two finite-difference runs)")
     args = ap.parse_args(argv)
     mode = disk.Parity() if args.mode == "parity" else disk.Split()
     t_end = args.t_end_yr * K["year"]
@@ -176,6 +239,8 @@ def main(argv=None):
         s, _ = jax.lax.scan(lambda s, dt: (step(m, mode, s, dt), None), s0, dts)
         return outcomes(m, s.sigma_dust, sel)
 
+    if args.directional:
+        return directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec_diff)
     J_fwd = timed("jacfwd", jax.jacfwd(lambda x: forward(x)[0]), x0)
 
     def reverse_y(x):

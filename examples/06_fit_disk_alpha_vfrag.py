@@ -4,8 +4,8 @@ Shows: the differentiable radial disk (jaxcoag.disk: DustPy's model - viscous ga
 coagulation and fragmentation in every cell - in split mode, 7x faster than parity mode per
 step on this small grid) as a forward model; a synthetic observation at known
 values (DustPy's defaults alpha = 1e-3, v_frag = 1 m/s) with 1 % noise (fixed PRNG key): the dust surface density
-Sigma_d(r) and the peak grain size a_peak(r) (``a_peak(smooth=True)``, differentiable) in the cells from 3 to
-30 au at two epochs; recovery of (alpha, v_frag) from a start a factor 3 away (alpha x 3, v_frag / 3) by optimistix
+Sigma_d(r) and the mass-weighted mean grain size a_mean(r) (``DiskResult.a_mean``, differentiable; the peak size
+jumps between the modes of a bimodal distribution, docs/design_notes.md) in the cells from 3 to 30 au at two epochs; recovery of (alpha, v_frag) from a start a factor 3 away (alpha x 3, v_frag / 3) by optimistix
 Levenberg-Marquardt with forward-mode Jacobians through the whole time loop, and - in the full run - by optax Adam.
 
 alpha and v_frag are separately identifiable: the fragmentation-limited size a_frag ~ v_frag^2 / alpha fixes their
@@ -35,7 +35,7 @@ TRUTH = {"alpha": 1e-3, "v_frag": 100.0}  # DustPy's defaults [-], [cm s^-1]
 
 
 def forward_model(quick):
-    """(observe, t_obs [yr]): observe(log_params) -> (ln Sigma_d, ln a_peak), each (epochs, cells)."""
+    """(observe, t_obs [yr]): observe(log_params) -> (ln Sigma_d, ln a_mean), each (epochs, cells)."""
     grid = dict(nr=10, r_min=3.0 * C["au"], r_max=30.0 * C["au"], m_max=10.0, bins_per_decade=4 if quick else 6)
     t_obs = np.array([1000.0, 3000.0])
     t_out = np.concatenate([[0.0], t_obs]) * C["year"]
@@ -64,7 +64,7 @@ def main(argv=None):
     k1, k2 = jax.random.split(jax.random.key(2026))
     target = (obs[0] + noise * jax.random.normal(k1, obs[0].shape), obs[1] + noise * jax.random.normal(k2, obs[1].shape))
     print(f"forward model: DustPy's disk, 3-30 au in 10 cells, observed at t = {t_obs.tolist()} yr "
-          f"(Sigma_d and a_peak in {obs[0].shape[1]} cells, 1 % noise)")
+          f"(Sigma_d and a_mean in {obs[0].shape[1]} cells, 1 % noise)")
     print(f"truth: alpha = {TRUTH['alpha']:.3e}, v_frag = {TRUTH['v_frag']:.3e} cm/s; start: alpha x 3, v_frag / 3")
 
     def residuals(x, args):
@@ -116,7 +116,7 @@ def main(argv=None):
             def step(carry, _):
                 z, s = carry
                 # the loss as jacfwd's aux: one forward solve per step gives both value and gradient
-                g, v = jax.jacfwd(lambda q: (loss(q), loss(q)), has_aux=True)(z)
+                g, v = jax.jacfwd(lambda q: (lambda v: (v, v))(loss(q)), has_aux=True)(z)
                 upd, s = opt.update(g, s, z)
                 return (optax.apply_updates(z, upd), s), v
 

@@ -45,7 +45,8 @@ class Disk(AbstractEngine):
             :class:`~jaxcoag.disk.solve.Split` (Strang splitting, faster).
         max_steps: step budget per output interval (static; status ``max_steps_reached`` when spent).
         loop: ``"while"`` (default; forward-mode derivatives and vmap) or ``"scan"`` (``max_steps`` guarded
-            steps per output interval; reverse-mode derivatives too).
+            steps per output interval, checkpointed in two levels; reverse-mode derivatives too: DustPy's default
+            model over 4000 steps needs 1.4 GB of temporaries for the gradient, 111 MB forward).
         dt_max: upper bound on the step [s] (default: none, DustPy's rule alone).
 
     References: Stammler & Birnstiel (2022) §2.5.
