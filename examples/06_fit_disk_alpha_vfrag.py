@@ -5,7 +5,8 @@ coagulation and fragmentation in every cell - in split mode, 7x faster than pari
 step on this small grid) as a forward model; a synthetic observation at known
 values (DustPy's defaults alpha = 1e-3, v_frag = 1 m/s) with 1 % noise (fixed PRNG key): the dust surface density
 Sigma_d(r) and the mass-weighted mean grain size a_mean(r) (``DiskResult.a_mean``, differentiable; the peak size
-jumps between the modes of a bimodal distribution, docs/design_notes.md) in the cells from 3 to 30 au at two epochs; recovery of (alpha, v_frag) from a start a factor 3 away (alpha x 3, v_frag / 3) by optimistix
+jumps between the modes of a bimodal distribution, docs/design_notes.md) in the cells from 3 to 30 au at two
+epochs; recovery of (alpha, v_frag) from a start a factor 3 away (alpha x 3, v_frag / 3) by optimistix
 Levenberg-Marquardt with forward-mode Jacobians through the whole time loop, and - in the full run - by optax Adam.
 
 alpha and v_frag are separately identifiable: the fragmentation-limited size a_frag ~ v_frag^2 / alpha fixes their

@@ -27,7 +27,8 @@ state and from it with every populated dust bin perturbed by 1e-15 (relative), t
 parity test ``tests/test_disk.py`` compares against it; DustPy is not needed there).
 
 Run: ``python benchmarks/peers/dustpy_disk.py [--setup ci|default] [--t-end-yr T] [--modes parity,split,replay,perturbed]
-[--write-reference] [--dustpy-cache FILE.npz]``. Writes ``benchmarks/results/dustpy_disk_<setup>.json``.
+[--write-reference] [--dustpy-cache FILE.npz]``. Writes ``benchmarks/results/dustpy_disk_<setup>.json``
+(``dustpy_disk_<setup>_<modes>.json`` for other modes).
 
 References: Stammler & Birnstiel (2022) ApJ 935, 35 (DustPy).
 """
@@ -317,7 +318,9 @@ def main(argv=None):
                                    "steps": ours["steps"].tolist(), "speed_ratio_dustpy_over_ours": ratio,
                                    "status": ours["status"], "split_error_max": float(np.max(ours["split_error"])),
                                    "maxrss_mib_process": ours["maxrss_mib"], "per_snapshot": rows, "worst": worst}
-    out = ROOT / "benchmarks" / "results" / f"dustpy_disk_{args.setup}.json"
+    modes = [s for s in args.modes.split(",") if s]
+    tag = "" if modes == ["parity", "split"] else "_" + "_".join(modes)  # other modes do not overwrite the main file
+    out = ROOT / "benchmarks" / "results" / f"dustpy_disk_{args.setup}{tag}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(report, indent=1))
     print(f"wrote {out}")
