@@ -64,6 +64,20 @@ def build(setup, x):
     return disk.dustpy_default(**grid, alpha=a, v_frag=vf, m_disk=md, r_c=rc)
 
 
+def timed(timings, name, fn, *a):
+    """Compile fn ahead of time, run it once; record compile and run wall times [s] and XLA's temporaries [MiB]."""
+    t0 = time.perf_counter()
+    c = jax.jit(fn).lower(*a).compile()
+    timings[name + "_compile_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(c(*a))
+    timings[name + "_s"] = time.perf_counter() - t0
+    mem = c.memory_analysis()
+    if mem is not None:
+        timings[name + "_temp_mib"] = mem.temp_size_in_bytes / 2**20
+    return out
+
+
 def cells(model):
     """Concrete cell selections of a model's grid (which does not depend on x): interior, the 10-30 au ring, and
     the index of the cell nearest 10 au."""
@@ -125,21 +139,9 @@ def directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec
         res = disk.solve(m, t_out, mode=mode, loop="scan", max_steps=n + 8, throw=False)
         return jnp.dot(c, outcomes(m, res.sigma_dust[-1], sel))
 
-    def timed(name, fn, *a):
-        t0 = time.perf_counter()
-        comp = jax.jit(fn).lower(*a).compile()
-        timings[name + "_compile_s"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(comp(*a))
-        timings[name + "_s"] = time.perf_counter() - t0
-        mem = comp.memory_analysis()
-        if mem is not None:
-            timings[name + "_temp_mib"] = mem.temp_size_in_bytes / 2**20
-        return out
-
-    jv = np.asarray(timed("jvp", lambda x: jax.jvp(lambda z: forward(z)[0], (x,), (d,))[1], x0))
+    jv = np.asarray(timed(timings, "jvp", lambda x: jax.jvp(lambda z: forward(z)[0], (x,), (d,))[1], x0))
     print(f"jvp {timings['jvp_s']:.1f} s", flush=True)
-    g = np.asarray(timed("grad", jax.grad(reverse_c), x0))
+    g = np.asarray(timed(timings, "grad", jax.grad(reverse_c), x0))
     print(f"grad {timings['grad_s']:.1f} s", flush=True)
     pin = jax.jit(pinned).lower(x0).compile()
     t0 = time.perf_counter()
@@ -193,24 +195,12 @@ def main(argv=None):
     if args.memory_only is not None:
         return memory_only(args, mode, t_out, x0, sel)
 
-    def timed(name, fn, *a):
-        t0 = time.perf_counter()
-        c = jax.jit(fn).lower(*a).compile()
-        timings[name + "_compile_s"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(c(*a))
-        timings[name + "_s"] = time.perf_counter() - t0
-        mem = c.memory_analysis()
-        if mem is not None:
-            timings[name + "_temp_mib"] = mem.temp_size_in_bytes / 2**20
-        return out
-
     def forward(x):
         m = build(args.setup, x)
         res = disk.solve(m, t_out, mode=mode, throw=False)
         return outcomes(m, res.sigma_dust[-1], sel), res.n_steps[-1], res.final_state
 
-    y0, n_steps, s_end = timed("forward", forward, x0)
+    y0, n_steps, s_end = timed(timings, "forward", forward, x0)
     n = int(n_steps)
     print(f"{args.setup} grid, {args.mode} mode, {args.t_end_yr:g} yr: {n} steps, forward {timings['forward_s']:.1f} s "
           f"(compile {timings['forward_compile_s']:.1f} s)", flush=True)
@@ -241,14 +231,14 @@ def main(argv=None):
 
     if args.directional:
         return directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec_diff)
-    J_fwd = timed("jacfwd", jax.jacfwd(lambda x: forward(x)[0]), x0)
+    J_fwd = timed(timings, "jacfwd", jax.jacfwd(lambda x: forward(x)[0]), x0)
 
     def reverse_y(x):
         m = build(args.setup, x)
         res = disk.solve(m, t_out, mode=mode, loop="scan", max_steps=n + 8, throw=False)
         return outcomes(m, res.sigma_dust[-1], sel)
 
-    J_rev = timed("jacrev", jax.jacrev(reverse_y), x0)
+    J_rev = timed(timings, "jacrev", jax.jacrev(reverse_y), x0)
     pin = jax.jit(pinned).lower(x0).compile()
     t0 = time.perf_counter()
     J_fd = np.zeros((3, 4))
