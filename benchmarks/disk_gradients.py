@@ -11,13 +11,14 @@ Outcomes y (at t_end): the dust mass left in the disk [M_earth] (interior cells)
 * ``forward``: ``jax.jacfwd`` through ``disk.solve`` (``lax.while_loop``, adaptive steps);
 * ``reverse``: ``jax.jacrev`` through ``disk.solve(loop="scan")`` (``max_steps`` = the base run's step count
   + 8 guarded steps, each checkpointed);
-* ``fd``: central differences with step h in x of the same outcomes computed by scanning
-  ``jaxcoag.disk.solve.step`` over the base run's step sequence. The step-size rule (DustPy's: a minimum over
-  cells and bins) is not differentiated, so the derivative is that of the map with the steps held fixed;
-  differences of free-running solves would also see the perturbed runs choose other steps.
+* ``fd``: central differences with step h in x of the same outcomes computed by replaying the base run's own step
+  sequence (``disk.solve(..., record_steps=K)`` records it; ``jaxcoag.disk.solve.replay`` takes those steps). The
+  step-size rule (DustPy's: a minimum over cells and bins) is not differentiated, so the derivative is that of the
+  map with the steps held fixed; differences of free-running solves would also see the perturbed runs choose
+  other steps.
 
-The base step sequence is recorded by a scan that applies the solver's rule (dt = min(cfl rate, t_end - t)) and
-checked against the adaptive solve's final state. Reported: the three Jacobians, the largest relative differences
+The replay at the base point is checked against the adaptive solve (``pinned_outcome_rel_diff``: round-off of two
+compilations of the same steps). Reported: the three Jacobians, the largest relative differences
 forward vs fd and reverse vs forward, wall times (compile apart), and XLA's memory analysis of the compiled
 forward and reverse programs (temporary buffers: the peak working memory beyond inputs and outputs).
 
@@ -44,13 +45,12 @@ if str(ROOT) not in sys.path:
 import jax
 
 jax.config.update("jax_enable_x64", True)
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import _common as C
 from jaxcoag import disk
-from jaxcoag.disk.solve import step
+from jaxcoag.disk.solve import replay
 
 K = disk.gas.DUSTPY_CONSTANTS
 M_EARTH = 5.9722e27  # g
@@ -126,10 +126,10 @@ def memory_only(args, mode, t_out, x0, sel):
     return report
 
 
-def directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec_diff):
+def directional(args, forward, pinned, x0, y0, n, dts0, t_out, mode, sel, timings):
     """The cheaper check (``--directional``): one direction d through all four ln-parameters. Forward: one
     ``jax.jvp`` (J d, three outcomes); reverse: one ``jax.grad`` of the weighted sum c . y (c = 1/y for the masses,
-    1 for ln a_mean), dotted with d; finite differences: two pinned-step runs along d."""
+    1 for ln a_mean), dotted with d; finite differences: two replays of the jvp's own primal steps along d."""
     d = jnp.array([0.3, -0.5, 0.7, 0.4])
     y0 = np.asarray(y0)
     c = jnp.array([1.0 / y0[0], 1.0 / y0[1], 1.0])
@@ -139,20 +139,26 @@ def directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec
         res = disk.solve(m, t_out, mode=mode, loop="scan", max_steps=n + 8, throw=False)
         return jnp.dot(c, outcomes(m, res.sigma_dust[-1], sel))
 
-    jv = np.asarray(timed(timings, "jvp", lambda x: jax.jvp(lambda z: forward(z)[0], (x,), (d,))[1], x0))
-    print(f"jvp {timings['jvp_s']:.1f} s", flush=True)
+    def jvp(x):
+        (y, _, dts), (ty, _, _) = jax.jvp(lambda z: forward(z, args.record), (x,), (d,))
+        return ty, dts
+
+    jv, dts = timed(timings, "jvp", jvp, x0)
+    jv = np.asarray(jv)
+    dts, seq = steps_used(dts, dts0, args.record)
+    print(f"jvp {timings['jvp_s']:.1f} s; its primal steps against the base run's: {seq}", flush=True)
     g = np.asarray(timed(timings, "grad", jax.grad(reverse_c), x0))
     print(f"grad {timings['grad_s']:.1f} s", flush=True)
-    pin = jax.jit(pinned).lower(x0).compile()
+    pin = jax.jit(pinned).lower(x0, dts).compile()
     t0 = time.perf_counter()
-    fd = (np.asarray(pin(x0 + args.h * d)) - np.asarray(pin(x0 - args.h * d))) / (2 * args.h)
+    fd = (np.asarray(pin(x0 + args.h * d, dts)) - np.asarray(pin(x0 - args.h * d, dts))) / (2 * args.h)
     timings["fd_2_runs_s"] = time.perf_counter() - t0
-    y_pin = np.asarray(pin(x0))
+    y_pin = np.asarray(pin(x0, dts))
     rel_fwd_fd = np.abs(jv - fd) / np.abs(fd)
     rev_dir, fwd_dir = float(g @ np.asarray(d)), float(np.asarray(c) @ jv)
     rel_rev_fwd = abs(rev_dir - fwd_dir) / abs(fwd_dir)
     print(f"outcomes at {args.t_end_yr:g} yr: " + ", ".join(f"{o} = {v:.6g}" for o, v in zip(OUTCOMES, y0))
-          + f" (pinned-step recomputation differs by {np.max(np.abs(y_pin / y0 - 1)):.1e})")
+          + f" (replay of the steps differs by {np.max(np.abs(y_pin / y0 - 1)):.1e})")
     for i, o in enumerate(OUTCOMES):
         print(f"d {o:28s} / d ln x . d: forward {jv[i]:.8e}  fd {fd[i]:.8e}  rel. difference {rel_fwd_fd[i]:.1e}")
     print(f"c . J d: reverse {rev_dir:.10e}  forward {fwd_dir:.10e}  rel. difference {rel_rev_fwd:.1e}; reverse "
@@ -160,10 +166,10 @@ def directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec
     print("  ".join(f"{k} {v:.1f}" for k, v in timings.items()))
     report = {"setup": args.setup, "mode": args.mode, "t_end_yr": args.t_end_yr, "h": args.h, "steps": n,
               "direction_ln_params": np.asarray(d).tolist(), "parameters": [f"ln {p}" for p in NAMES],
-              "outcomes": list(OUTCOMES), "y": y0.tolist(), "jvp": jv.tolist(), "fd_pinned_steps": fd.tolist(),
+              "outcomes": list(OUTCOMES), "y": y0.tolist(), "jvp": jv.tolist(), "fd_replayed_steps": fd.tolist(),
               "rel_forward_vs_fd": rel_fwd_fd.tolist(), "weights_c": np.asarray(c).tolist(),
               "grad_reverse_c_dot_y": g.tolist(), "rel_reverse_vs_forward": rel_rev_fwd,
-              "recorded_steps_rel_diff": rec_diff, "pinned_outcome_rel_diff": float(np.max(np.abs(y_pin / y0 - 1))),
+              "jvp_steps_vs_base_run": seq, "replay_outcome_rel_diff": float(np.max(np.abs(y_pin / y0 - 1))),
               "timings": timings, "maxrss_mib_process": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
               "machine": C.machine_info()}
     out = ROOT / "benchmarks" / "results" / f"disk_gradients_{args.setup}_{args.mode}_directional.json"
@@ -171,6 +177,19 @@ def directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec
     out.write_text(json.dumps(report, indent=1))
     print(f"wrote {out}")
     return report
+
+
+def steps_used(dts, dts0, capacity):
+    """The steps a run recorded (its finite entries) and how they compare with the base run's ``dts0``: (steps,
+    dict of the counts and the largest relative step difference)."""
+    dts = np.asarray(dts)
+    k = int(np.sum(np.isfinite(dts)))
+    if k >= capacity:
+        raise SystemExit(f"the run filled the step record (--record {capacity}): rerun with a larger --record")
+    dts = dts[:k]
+    m = min(k, dts0.size)
+    return dts, {"steps": k, "base_steps": int(dts0.size), "identical_steps": int(np.sum(dts[:m] == dts0[:m])),
+                 "max_rel_step_difference": float(np.max(np.abs(dts[:m] / dts0[:m] - 1.0))) if m else 0.0}
 
 
 def main(argv=None):
@@ -182,6 +201,8 @@ def main(argv=None):
     ap.add_argument("--memory-only", type=int, default=None, metavar="N_STEPS",
                     help="compile only (nothing runs): XLA's memory analysis of the forward solve and of the "
                          "reverse-mode gradient of the dust mass (jax.grad, loop='scan' with N_STEPS guarded steps)")
+    ap.add_argument("--record", type=int, default=1 << 15, metavar="K",
+                    help="capacity of the recorded step sequence (the base run must take at most K steps)")
     ap.add_argument("--directional", action="store_true",
                     help="one direction through the four parameters instead of the full Jacobians (one jvp, one "
                          "reverse gradient, two finite-difference runs)")
@@ -195,43 +216,32 @@ def main(argv=None):
     if args.memory_only is not None:
         return memory_only(args, mode, t_out, x0, sel)
 
-    def forward(x):
+    def forward(x, record=0):
         m = build(args.setup, x)
-        res = disk.solve(m, t_out, mode=mode, throw=False)
-        return outcomes(m, res.sigma_dust[-1], sel), res.n_steps[-1], res.final_state
+        res = disk.solve(m, t_out, mode=mode, throw=False, record_steps=record)
+        return outcomes(m, res.sigma_dust[-1], sel), res.n_steps[-1], res.step_sizes
 
-    y0, n_steps, s_end = timed(timings, "forward", forward, x0)
+    y0, n_steps, dts0 = timed(timings, "forward", lambda x: forward(x, args.record), x0)
     n = int(n_steps)
     print(f"{args.setup} grid, {args.mode} mode, {args.t_end_yr:g} yr: {n} steps, forward {timings['forward_s']:.1f} s "
           f"(compile {timings['forward_compile_s']:.1f} s)", flush=True)
+    dts0, _ = steps_used(dts0, np.zeros(0), args.record)
 
-    def record(x):
-        """The solver's step sequence by its rule, in a scan of n steps (and the final state, to check it)."""
+    def pinned(x, dts):
         m = build(args.setup, x)
         s0 = disk.solve(m, jnp.array([0.0]), mode=mode).final_state
-
-        def body(s, _):
-            dt = jnp.minimum(s.dt_next, t_end - s.t)
-            s = step(m, mode, s, dt)
-            s = eqx.tree_at(lambda q: q.t, s, jnp.where(t_end - s.t <= 1e-12 * t_end, t_end, s.t))  # as the solver
-            return s, dt
-
-        return jax.lax.scan(body, s0, None, length=n)
-
-    s_rec, dts = jax.jit(record)(x0)
-    rec_diff = float(jnp.max(jnp.abs(s_rec.sigma_dust - s_end.sigma_dust) / jnp.maximum(s_end.sigma_dust, 1e-300)))
-    print(f"recorded step sequence: final time {float(s_rec.t) / K['year']:.6g} yr, max rel. difference of Sigma_d "
-          f"from the adaptive solve {rec_diff:.2e}", flush=True)
-
-    def pinned(x):
-        m = build(args.setup, x)
-        s0 = disk.solve(m, jnp.array([0.0]), mode=mode).final_state
-        s, _ = jax.lax.scan(lambda s, dt: (step(m, mode, s, dt), None), s0, dts)
-        return outcomes(m, s.sigma_dust, sel)
+        return outcomes(m, replay(m, mode, s0, dts)[0].sigma_dust, sel)
 
     if args.directional:
-        return directional(args, forward, pinned, x0, y0, n, t_out, mode, sel, timings, rec_diff)
-    J_fwd = timed(timings, "jacfwd", jax.jacfwd(lambda x: forward(x)[0]), x0)
+        return directional(args, forward, pinned, x0, y0, n, dts0, t_out, mode, sel, timings)
+    def y_and_steps(x):
+        y, _, dts = forward(x, args.record)
+        return y, dts
+
+    # the Jacobian and the steps of its own primal run (the finite differences replay those)
+    J_fwd, dts = timed(timings, "jacfwd", jax.jacfwd(y_and_steps, has_aux=True), x0)
+    dts, seq = steps_used(dts, dts0, args.record)
+    print(f"jacfwd {timings['jacfwd_s']:.1f} s; its primal steps against the base run's: {seq}", flush=True)
 
     def reverse_y(x):
         m = build(args.setup, x)
@@ -239,21 +249,21 @@ def main(argv=None):
         return outcomes(m, res.sigma_dust[-1], sel)
 
     J_rev = timed(timings, "jacrev", jax.jacrev(reverse_y), x0)
-    pin = jax.jit(pinned).lower(x0).compile()
+    pin = jax.jit(pinned).lower(x0, dts).compile()
     t0 = time.perf_counter()
     J_fd = np.zeros((3, 4))
     for k in range(4):
         e = jnp.zeros(4).at[k].set(args.h)
-        J_fd[:, k] = (np.asarray(pin(x0 + e)) - np.asarray(pin(x0 - e))) / (2 * args.h)
+        J_fd[:, k] = (np.asarray(pin(x0 + e, dts)) - np.asarray(pin(x0 - e, dts))) / (2 * args.h)
     timings["fd_8_runs_s"] = time.perf_counter() - t0
-    y_pin = np.asarray(pin(x0))
+    y_pin = np.asarray(pin(x0, dts))
 
     J_fwd, J_rev = np.asarray(J_fwd), np.asarray(J_rev)
     scale = np.maximum(np.abs(J_fd), 1e-6 * np.max(np.abs(J_fd), axis=1, keepdims=True))
     rel_fwd_fd = np.abs(J_fwd - J_fd) / scale
     rel_rev_fwd = np.abs(J_rev - J_fwd) / scale
     print(f"outcomes at {args.t_end_yr:g} yr: " + ", ".join(f"{o} = {v:.6g}" for o, v in zip(OUTCOMES, np.asarray(y0)))
-          + f" (pinned-step recomputation differs by {np.max(np.abs(y_pin / np.asarray(y0) - 1)):.1e})")
+          + f" (replay of the steps differs by {np.max(np.abs(y_pin / np.asarray(y0) - 1)):.1e})")
     print(f"{'d y / d ln x':28s} " + " ".join(f"{p:>26s}" for p in NAMES))
     for i, o in enumerate(OUTCOMES):
         print(f"{o:28s} " + " ".join(f"{J_fwd[i, k]:12.5e} ({rel_fwd_fd[i, k]:.0e},{rel_rev_fwd[i, k]:.0e})"
@@ -263,9 +273,10 @@ def main(argv=None):
     print("  ".join(f"{k} {v:.1f}" for k, v in timings.items()))
     report = {"setup": args.setup, "mode": args.mode, "t_end_yr": args.t_end_yr, "h": args.h, "steps": n,
               "parameters": [f"ln {p}" for p in NAMES], "outcomes": list(OUTCOMES), "y": np.asarray(y0).tolist(),
-              "jac_forward": J_fwd.tolist(), "jac_reverse": J_rev.tolist(), "jac_fd_pinned_steps": J_fd.tolist(),
+              "jac_forward": J_fwd.tolist(), "jac_reverse": J_rev.tolist(), "jac_fd_replayed_steps": J_fd.tolist(),
               "max_rel_forward_vs_fd": float(rel_fwd_fd.max()), "max_rel_reverse_vs_forward": float(rel_rev_fwd.max()),
-              "recorded_steps_rel_diff": rec_diff, "timings": timings,
+              "jacfwd_steps_vs_base_run": seq, "replay_outcome_rel_diff": float(np.max(np.abs(y_pin / np.asarray(y0) - 1))),
+              "timings": timings,
               "maxrss_mib_process": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
               "machine": C.machine_info()}
     out = ROOT / "benchmarks" / "results" / f"disk_gradients_{args.setup}_{args.mode}.json"

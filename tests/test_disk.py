@@ -306,3 +306,97 @@ def test_split_mode_close_to_parity_mode():
     assert np.max(np.abs(ip - isp)) <= 2
     np.testing.assert_allclose(np.asarray(spl.sigma_gas), np.asarray(par.sigma_gas), rtol=1e-12)  # same gas step
     assert float(par.split_error[-1]) == 0.0 and 0.0 < float(spl.split_error[-1]) < np.inf
+
+
+# ------------------------------------------------------------------------------------ recorded steps, replay
+_RBASE = dict(nr=6, r_min=3.0 * 1.495978707e13, r_max=30.0 * 1.495978707e13, m_max=1e-4, bins_per_decade=3)
+_RT = jnp.array([0.0, 3.0, 10.0]) * YR
+
+
+def _rmodel(x):
+    """The small disk of the replay tests as a function of ln(alpha, v_frag)."""
+    return disk.dustpy_default(**_RBASE, alpha=jnp.exp(x[0]), v_frag=jnp.exp(x[1]))
+
+
+def _rstart(model):
+    """A top-heavy dust distribution (fragmenting at v_frag ~ 1 m/s: fast rates, so the step rule acts)."""
+    p = model.initial()
+    w = jnp.sqrt(model.particle_size())
+    return disk.DiskProfile(p.sigma_gas, 0.01 * p.sigma_gas[:, None] * (w / jnp.sum(w))[None, :])
+
+
+def _replayed(x, s0, dts, at=None):
+    from jaxcoag.disk.solve import replay
+
+    return replay(_rmodel(x), disk.Split(cfl=0.01), s0, dts, save_at=at)
+
+
+def test_recorded_steps_replay_the_run():
+    """``record_steps`` keeps the adaptive run's own step sizes without changing the run; ``replay`` of them
+    recomputes the run and its snapshots to round-off. Bad record and replay requests are refused."""
+    from jaxcoag.disk.solve import replay
+
+    x0 = jnp.log(jnp.array([1e-3, 100.0]))
+    m0, mode = _rmodel(x0), disk.Split(cfl=0.01)
+    plain = disk.solve(m0, _RT, mode=mode, initial=_rstart(m0))
+    rec = disk.solve(m0, _RT, mode=mode, initial=_rstart(m0), record_steps=64)
+    n = int(rec.n_steps[-1])
+    dts = np.asarray(rec.step_sizes)
+    assert 5 <= n < 64 and np.all(np.isfinite(dts[:n]) & (dts[:n] > 0)) and np.all(np.isnan(dts[n:]))
+    assert abs(dts[:n].sum() / float(_RT[-1]) - 1.0) < 1e-14  # the steps add up to the run (landing on t_out)
+    assert len(np.unique(dts[:n])) > 2  # the rule's own steps, not one clipped size
+    np.testing.assert_array_equal(np.asarray(rec.sigma_dust), np.asarray(plain.sigma_dust))  # recording changes nothing
+    assert plain.step_sizes.shape == (0,)
+
+    at = np.asarray(rec.n_steps)[1:]
+    s0 = disk.solve(m0, _RT[:1], mode=mode, initial=_rstart(m0)).final_state
+    fin, saved = jax.jit(lambda x: _replayed(x, s0, jnp.asarray(dts[:n]), at))(x0)
+    np.testing.assert_allclose(np.asarray(fin.sigma_dust), np.asarray(rec.sigma_dust[-1]), rtol=1e-12, atol=1e-300)
+    np.testing.assert_allclose(np.asarray(saved["sigma_dust"]), np.asarray(rec.sigma_dust[1:]), rtol=1e-12,
+                               atol=1e-300)
+    np.testing.assert_allclose(np.asarray(saved["sigma_gas"]), np.asarray(rec.sigma_gas[1:]), rtol=1e-13)
+    assert abs(float(fin.t) / float(_RT[-1]) - 1) < 1e-14 and int(fin.n_steps) == n
+
+    with pytest.raises(JaxcoagInputError, match="record_steps"):
+        disk.Disk(record_steps=-1)
+    with pytest.raises(JaxcoagInputError, match="record_steps=64"):
+        disk.solve(m0, _RT[-1:] + YR, mode=mode, initial=rec)
+    with pytest.raises(JaxcoagInputError, match="dt_log"):
+        replay(m0, mode, s0, dts)  # the NaN tail of an unused record
+    with pytest.raises(JaxcoagInputError, match="save_at"):
+        replay(m0, mode, s0, jnp.asarray(dts[:n]), save_at=[n + 1])
+
+
+@pytest.mark.slow  # suite budget (about 30 s of compiles on 2 cores)
+def test_forward_derivative_is_that_of_the_replayed_steps():
+    """The adaptive run's forward-mode derivative equals the derivative of the replay of its own steps (the step
+    rule is not differentiated), and central differences of the replay check it: the finite-difference check of
+    ``benchmarks/disk_gradients.py``."""
+    x0 = jnp.log(jnp.array([1e-3, 100.0]))
+    m0, mode = _rmodel(x0), disk.Split(cfl=0.01)
+    rec = disk.solve(m0, _RT, mode=mode, initial=_rstart(m0), record_steps=64)
+    n = int(rec.n_steps[-1])
+    dts = jnp.asarray(np.asarray(rec.step_sizes)[:n])
+    area = rec.area[1:-1]
+
+    def mass(s):  # interior dust mass [g]
+        return jnp.sum(s[1:-1].sum(-1) * area)
+
+    def adaptive(x):
+        m = _rmodel(x)
+        return mass(disk.solve(m, _RT, mode=mode, initial=_rstart(m)).sigma_dust[-1])
+
+    def pinned(x):  # the same start as adaptive(x) (its first radial velocity and step depend on x)
+        m = _rmodel(x)
+        s0 = disk.solve(m, _RT[:1], mode=mode, initial=_rstart(m)).final_state
+        return mass(_replayed(x, s0, dts)[0].sigma_dust)
+
+    d = jnp.array([0.6, -0.8])
+    _, jv = jax.jvp(adaptive, (x0,), (d,))
+    _, jv_rep = jax.jvp(jax.jit(pinned), (x0,), (d,))
+    assert abs(float(jv)) > 1e-6 * float(pinned(x0))  # a derivative that is not trivially zero
+    np.testing.assert_allclose(float(jv_rep), float(jv), rtol=1e-9)
+    h = 1e-4
+    p = jax.jit(pinned)
+    fd = (p(x0 + h * d) - p(x0 - h * d)) / (2 * h)
+    np.testing.assert_allclose(float(fd), float(jv), rtol=1e-6)

@@ -128,8 +128,8 @@ def run_jaxcoag(setup, t_yr, mode):
 
 
 def run_replay(setup, ref):
-    """jaxcoag's parity step (``jaxcoag.disk.solve.step``) driven by DustPy's own step sequence (the differences of
-    ``ref["step_t"]``, DustPy's time at the start of each step, and the last snapshot): the same discrete system
+    """jaxcoag's parity step driven by DustPy's own step sequence (``jaxcoag.disk.solve.replay``; the steps are the
+    differences of ``ref["step_t"]``, DustPy's time at the start of each step, and the last snapshot): the same discrete system
     with the same steps, so what is left is round-off, not the step rule's choices. Snapshots are taken after the
     step counts DustPy had at its snapshots. Returns a dict as :func:`run_jaxcoag`."""
     import jax
@@ -138,7 +138,7 @@ def run_replay(setup, ref):
     jax.config.update("jax_enable_x64", True)
     from jaxcoag import disk
     from jaxcoag._status import RESULT_NAMES  # DiskState.status holds the code
-    from jaxcoag.disk.solve import step
+    from jaxcoag.disk.solve import replay
 
     if "step_t" not in ref:
         raise SystemExit("replay needs DustPy's step times: this --dustpy-cache was written without them; delete it")
@@ -147,25 +147,14 @@ def run_replay(setup, ref):
     s0 = disk.solve(model, np.asarray([0.0]), mode=mode).final_state
     dts = np.diff(np.append(ref["step_t"], ref["t"][-1]))
     snap = np.asarray(ref["steps"], np.int64)  # steps taken at each snapshot (0 at t = 0)
-    if dts.size != snap[-1] or np.any(dts <= 0):
+    if dts.size != snap[-1] or np.any(dts <= 0) or snap[0] != 0:
         raise SystemExit(f"DustPy's step record is inconsistent ({dts.size} steps, {snap[-1]} counted)")
 
     @jax.jit
     def go(s0, dts):
-        sd0 = jnp.zeros((snap.size,) + s0.sigma_dust.shape).at[0].set(s0.sigma_dust)
-        sg0 = jnp.zeros((snap.size,) + s0.sigma_gas.shape).at[0].set(s0.sigma_gas)
-
-        def body(c, dt):
-            s, sd, sg = c
-            s = step(model, mode, s, dt)
-            k = jnp.searchsorted(jnp.asarray(snap), s.n_steps)  # the snapshot this step count is, if any
-            hit = jnp.asarray(snap)[jnp.minimum(k, snap.size - 1)] == s.n_steps
-            k = jnp.where(hit, k, 0)
-            sd = sd.at[k].set(jnp.where(hit, s.sigma_dust, sd[k]))
-            sg = sg.at[k].set(jnp.where(hit, s.sigma_gas, sg[k]))
-            return (s, sd, sg), None
-
-        (s, sd, sg), _ = jax.lax.scan(body, (s0, sd0, sg0), dts)
+        s, saved = replay(model, mode, s0, dts, save_at=snap[1:])
+        sd = jnp.concatenate([s0.sigma_dust[None], saved["sigma_dust"]])
+        sg = jnp.concatenate([s0.sigma_gas[None], saved["sigma_gas"]])
         return s, sd, sg
 
     t0 = time.perf_counter()

@@ -48,6 +48,9 @@ class Disk(AbstractEngine):
             steps per output interval, checkpointed in two levels; reverse-mode derivatives too: DustPy's default
             model over 4000 steps needs 1.4 GB of temporaries for the gradient, 111 MB forward).
         dt_max: upper bound on the step [s] (default: none, DustPy's rule alone).
+        record_steps: record the sizes of the first ``record_steps`` steps since t = 0 (static; default 0, none) in
+            ``DiskState.dt_log`` (``DiskResult.step_sizes``), 8 bytes each: the run's own step sequence, to replay it
+            with :func:`jaxcoag.disk.solve.replay` (finite differences with the steps held fixed).
 
     References: Stammler & Birnstiel (2022) §2.5.
     """
@@ -56,6 +59,7 @@ class Disk(AbstractEngine):
     max_steps: int = eqx.field(static=True, default=100_000)
     loop: str = eqx.field(static=True, default="while")
     dt_max: float | jax.Array = float("inf")
+    record_steps: int = eqx.field(static=True, default=0)
 
     def __check_init__(self):
         if not isinstance(self.mode, (Parity, Split)):
@@ -64,6 +68,10 @@ class Disk(AbstractEngine):
         if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, (int, np.integer)) or self.max_steps < 1:
             raise JaxcoagInputError(f"Disk(max_steps=...) must be a positive int (steps per output interval); got "
                                     f"{self.max_steps!r}.")
+        r = self.record_steps
+        if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 0 <= r <= 10_000_000:
+            raise JaxcoagInputError(f"Disk(record_steps=...) must be an int in [0, 1e7] (steps whose sizes are kept, "
+                                    f"8 bytes each); got {r!r}.")
         if self.loop not in ("while", "scan"):
             raise JaxcoagInputError(f"Disk(loop=...) must be 'while' or 'scan' (reverse-mode gradients); got "
                                     f"{self.loop!r}.")
@@ -88,6 +96,10 @@ class Disk(AbstractEngine):
         nr, nm = kernel.nr, kernel.nm
         if isinstance(initial, DiskResult):
             shp = initial.final_state.sigma_dust.shape
+            k = jnp.shape(initial.final_state.dt_log)[-1]
+            if k != self.record_steps:
+                raise JaxcoagInputError(f"the run being continued records {k} step sizes; continue it with "
+                                        f"record_steps={k} (got {self.record_steps}).")
         elif isinstance(initial, DiskProfile):
             shp = jnp.shape(initial.sigma_dust)
             if jnp.shape(initial.sigma_gas) != (nr,):
@@ -110,7 +122,7 @@ class Disk(AbstractEngine):
     def _init(self, kernel, initial, t0, outcome, key):
         if isinstance(initial, DiskResult):
             return initial.final_state
-        return _init_jit(kernel, self.mode, initial, jnp.asarray(t0, jnp.float64))
+        return _init_jit(kernel, self.mode, initial, jnp.asarray(t0, jnp.float64), self.record_steps)
 
     def _advance(self, kernel, state, t_seg, outcome):
         return _advance_jit(kernel, self.mode, state, jnp.asarray(t_seg, jnp.float64), self.max_steps, self.loop,
@@ -132,8 +144,9 @@ class Disk(AbstractEngine):
 
 
 @eqx.filter_jit
-def _init_jit(model, mode, initial, t0):
-    """The engine state at t0 (compiled: the initial profiles, the first radial velocity and step size)."""
+def _init_jit(model, mode, initial, t0, record_steps):
+    """The engine state at t0 (compiled: the initial profiles, the first radial velocity and step size; an empty
+    (NaN) record of ``record_steps`` step sizes)."""
     if initial is None:
         initial = model.initial()
     z = jnp.zeros((), jnp.float64)
@@ -141,7 +154,8 @@ def _init_jit(model, mode, initial, t0):
     sd = jnp.asarray(initial.sigma_dust, jnp.float64)
     v_rad, rate = model.start(sg, sd)
     return DiskState(t=t0, sigma_gas=sg, sigma_dust=sd, m_acc_gas=z, m_out_gas=z, n_steps=jnp.zeros((), jnp.int64),
-                     v_rad=v_rad, dt_next=mode.cfl * rate, split_error=z, status=result_code(RESULTS.successful))
+                     v_rad=v_rad, dt_next=mode.cfl * rate, split_error=z, status=result_code(RESULTS.successful),
+                     dt_log=jnp.full((record_steps,), jnp.nan, jnp.float64))
 
 
 @eqx.filter_jit
@@ -198,6 +212,13 @@ class DiskResult(AbstractResult):
     final_state: DiskState
 
     # ------------------------------------------------------------------ derived
+    @property
+    def step_sizes(self):
+        """(K,) sizes [s] of the run's first K steps since t = 0, NaN past the last step taken (K: the engine's
+        ``record_steps``; empty by default). ``step_sizes[:n_steps[-1]]`` is the run's step sequence, for
+        :func:`jaxcoag.disk.solve.replay`."""
+        return self.final_state.dt_log
+
     @property
     def area(self):
         """(nr,) annulus areas [cm^2]."""
@@ -333,7 +354,7 @@ class DiskResult(AbstractResult):
 
 
 def solve(model, t_out, *, mode=None, initial=None, max_steps=100_000, loop="while", checkpoint=None, progress=False,
-          throw=True, dt_max=float("inf")):
+          throw=True, dt_max=float("inf"), record_steps=0):
     """Evolve a radial disk model to the output times (short form of ``jaxcoag.evolve(model, Disk(...), ...)``).
 
     Arguments:
@@ -341,7 +362,7 @@ def solve(model, t_out, *, mode=None, initial=None, max_steps=100_000, loop="whi
         t_out: output times [s], strictly increasing, >= 0 (t_out[0] = 0 outputs the initial state).
         mode: :class:`~jaxcoag.disk.Parity` (default) or :class:`~jaxcoag.disk.Split`.
         initial: None (the model's initial profiles), a :class:`DiskProfile`, or a :class:`DiskResult` to continue.
-        max_steps, loop, dt_max: see :class:`Disk`.
+        max_steps, loop, dt_max, record_steps: see :class:`Disk`.
         checkpoint, progress, throw: as :func:`jaxcoag.evolve`.
 
     Returns: :class:`DiskResult` with ``.t`` [s], ``.r`` [cm], ``.m`` [g], ``.sigma_dust`` (t, r, m)
@@ -349,5 +370,6 @@ def solve(model, t_out, *, mode=None, initial=None, max_steps=100_000, loop="whi
 
     References: Stammler & Birnstiel (2022, ApJ 935, 35).
     """
-    engine = Disk(mode=Parity() if mode is None else mode, max_steps=max_steps, loop=loop, dt_max=dt_max)
+    engine = Disk(mode=Parity() if mode is None else mode, max_steps=max_steps, loop=loop, dt_max=dt_max,
+                  record_steps=record_steps)
     return evolve(model, engine, initial, t_out, checkpoint=checkpoint, progress=progress, throw=throw)
