@@ -241,6 +241,13 @@ class MonteCarlo(AbstractEngine):
             function of the ``MCState``), checked after every event: the run then ends with status
             ``stopped``, ``result.t_stop`` is the event time and later outputs repeat that state.
 
+    Real-valued multiplicities (fragment counts of fragmenting outcomes, merged species) can leave a
+    z = 0 species with less than one event removes (w < 1; 1 < w < 2 for its own pairs): its
+    events are then partial, the fraction phi = w/dw it holds, with products scaled by phi and the
+    pair rate divided by phi (mass exact, expected flux unchanged; ``jaxcoag.mc.rates``). Such
+    fractional carriers persist, so fragmenting runs without grouping hold more species than
+    particles: give such runs a ``capacity`` several times ``n_particles``.
+
     ``evolve`` result: :class:`jaxcoag.MCResult`. Not differentiable (discrete sampling); jit-compiled;
     batch over keys, kernel parameters or initial states with ``jax.vmap`` (``throw=False``).
 

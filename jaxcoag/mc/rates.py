@@ -10,6 +10,14 @@ with (eq. 5.31 and the z = 0 correction of eq. 5.10b; errata in docs/design_note
 with C = K/V. Everything is evaluated as logs (w up to 1e160, 2^z up to 2^1000, kernels
 spanning hundreds of decades): no product m1*m2, g_a*g_b or 2^z_a*2^z_b is ever formed.
 
+Fractional multiplicities [own]: fragment counts are real numbers, so a z = 0 species may hold
+0 < w < 1 (or 1 < w < 2 for its own pairs), less than one event removes (Δw_i = 1 from the
+lower-zoom member i, Δw_j = 2^{−N_eps} from j, Δw = 2 from a z = 0 own pair). Such a pair takes
+part with the fraction φ = min(1, w_i/Δw_i, w_j/Δw_j) of the event that it holds (donors lose
+φ Δw, products get φ times their count: ``run._collide``), and its rate stored here is λ^G / φ,
+so that the expected collision flux (rate × φ) is the formula above. φ = 1 (rates unchanged)
+whenever the donors hold whole groups (integer multiplicities: every Sticking run).
+
 References: Ormel (2008) thesis eqs. (5.7), (5.10), (5.12), (5.13), (5.31), (5.32);
 rate designs A/B and MC hazards 4-5 in docs/design_notes.md.
 """
@@ -83,7 +91,15 @@ def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
     lw = jnp.where(wpos, jnp.log(jnp.where(wpos, w, 1.0)), -jnp.inf)
     lwa = lw[a]
     zmin = jnp.minimum(za, z)
-    off = lwa + lw + (zmin + ne).astype(logm.dtype) * LN2 + logK - LN2
+    # event fraction phi (see the module docstring and run._collide): the lower-zoom member i gives
+    # one group, the other 2^-N_eps groups (N_eps = 0 for equal zooms, so the roles do not matter
+    # there); a donor holding less (0 < w < 1 at z = 0) joins with the fraction it has, at a rate
+    # divided by that fraction (ln phi = 0 for whole groups, the rate is then unchanged bitwise)
+    ne_ln2 = ne.astype(logm.dtype) * LN2
+    a_low = za <= z
+    lphi = jnp.minimum(0.0, jnp.minimum(jnp.where(a_low, lwa, lwa + ne_ln2), jnp.where(a_low, lw + ne_ln2, lw)))
+    lphi = jnp.where(jnp.isfinite(lphi), lphi, 0.0)
+    off = lwa + lw + (zmin + ne).astype(logm.dtype) * LN2 + logK - LN2 - lphi
     # diagonal
     wa, zaa = w[a], z[a]
     lg = lwa + zaa.astype(logm.dtype) * LN2
@@ -92,7 +108,10 @@ def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
     log_gm1 = jnp.where(gm1_pos, lg + jnp.log(-jnp.expm1(-jnp.where(gm1_pos, lg, 1.0))), -jnp.inf)
     d_grouped = lwa + log_gm1
     wm1 = wa - 1.0
-    d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2, -jnp.inf)
+    # z = 0 own pair: two particles leave (Δw = 2); with 1 < w < 2 the event takes the fraction
+    # phi = w/2 (all of it) at the rate ½ w (w - 1) C / phi (= (w - 1) C), see off-diagonal above
+    lphi_aa = jnp.where(wa >= 2.0, 0.0, lwa - LN2)
+    d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2 - lphi_aa, -jnp.inf)
     diag = jnp.where(zaa >= 1, d_grouped, d_single) + logK[a]
     idx = jnp.arange(S)
     row = jnp.where(idx == a, diag, off)
