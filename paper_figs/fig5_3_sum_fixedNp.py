@@ -61,6 +61,7 @@ def main(argv=None):
     import jax.numpy as jnp
     import numpy as np
 
+    import jaxcoag
     from jaxcoag import analytic
 
     plt = _common.pyplot()

@@ -76,6 +76,7 @@ def main(argv=None):
     _common.enable_x64()
     import numpy as np
 
+    import jaxcoag
     from jaxcoag import kernels as K
 
     plt = _common.pyplot()
