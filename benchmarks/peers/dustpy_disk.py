@@ -266,7 +266,8 @@ def main(argv=None):
             raise SystemExit("--write-reference writes the ci set-up only")
         REF.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(REF, t=ref["t"], sigma_dust=ref["sigma_dust"], sigma_gas=ref["sigma_gas"],
-                            steps=ref["steps"], r=ref["r"], ri=ref["ri"], m=ref["m"], a=ref["a"])
+                            steps=ref["steps"], step_t=ref["step_t"], r=ref["r"], ri=ref["ri"], m=ref["m"],
+                            a=ref["a"])
         print(f"wrote {REF}")
     report = {"setup": args.setup, "t_yr": t_yr.tolist(), "machine": machine_info(),
               "dustpy": {"steps": ref["steps"].tolist(), "wall_s": ref["wall"],
