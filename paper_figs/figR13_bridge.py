@@ -42,22 +42,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _common  # noqa: E402
-
-_ML_TAU = (0.25, 0.5, 1.0, 2.0, 4.0, 9.0)
-_ML_SIG = (0.008, 0.011, 0.014, 0.018, 0.024, 0.033)  # sigma / N_th, mean of 3 runs of N0 = 1000 (spec A9)
-
-
-def _chi2_p(obs, exp):
-    """p-value of chi^2 over k = 1..8 and the pooled tail (sparse bins pooled until E >= 5)."""
-    import numpy as np
-    from scipy import stats
-
-    o = np.concatenate([obs[:8], [obs[8:].sum()]]).astype(float)
-    e = np.concatenate([exp[:8], [exp[8:].sum()]])
-    while len(e) > 2 and e[-1] < 5:
-        o, e = np.concatenate([o[:-2], [o[-2:].sum()]]), np.concatenate([e[:-2], [e[-2:].sum()]])
-    e = e * o.sum() / e.sum()
-    return float(stats.chi2.sf(np.sum((o - e) ** 2 / e), max(len(o) - 2, 1)))
+from figR03_model_i import _ML_SIG, _ML_TAU, _chi2_p  # noqa: E402  (R95 Fig. 3's spread table and chi^2 test)
 
 
 def _binned_per_k(edges, n_bin):
