@@ -84,7 +84,25 @@ def test_readme_has_checked_numbers():
     assert {"0.5257729", "8.5627879", "1.5"} <= shown
 
 
-@pytest.mark.parametrize("start,src", BLOCKS, ids=[f"README.md:{s}" for s, _ in BLOCKS])
+# Blocks run only with `-m slow` (default-suite budget), named by a string unique to each, with the
+# default tests that cover the same code: the DG sum-kernel accuracy and gradient block (35 s on 2 cores)
+# <- tests/test_binned_dg.py (DG against the analytic sum-kernel solution, mass to round-off) and
+# tests/test_binned_gradients.py::test_reverse_and_forward_vs_fd (gradients through the solve).
+SLOW_BLOCKS = ("jax.grad(log_peak)",)
+
+
+def _param(start, src):
+    marks = [pytest.mark.slow] if any(k in src for k in SLOW_BLOCKS) else []
+    return pytest.param(start, src, id=f"README.md:{start}", marks=marks)
+
+
+def test_slow_blocks_exist():
+    """Every SLOW_BLOCKS key names exactly one README block (a renamed block must not silently drop out)."""
+    for k in SLOW_BLOCKS:
+        assert sum(k in src for _, src in BLOCKS) == 1, k
+
+
+@pytest.mark.parametrize("start,src", [_param(s, src) for s, src in BLOCKS])
 def test_readme_block_runs_and_numbers_match(start, src, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     checks = {line: (kind, exp) for line, _, kind, exp in claims(src)}
