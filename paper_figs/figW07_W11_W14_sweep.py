@@ -9,25 +9,34 @@ Each collision: one 2-D BCCA per structure (``contact.bcca``, key = structure) a
 of itself (the paper's "same BCCA", §4), head-on, in the centre-of-mass frame.
 
 The paper's sweep (Wada et al. §4-5, Table 3): N_total = 256, four material sets (quartz and ice, xi_crit = 2 and
-30 A), 3 structures, v_imp from 0.14 to 18 v_0 (~16 speeds), dt = 0.014 t_c. Its cost here, measured: a 256-monomer
-collision runs at ~850 steps/s on one core of this (loaded) machine, compile ~90 s per size; a collision lasts until
-the aggregates have passed through each other, a relative displacement D ~ 8 r_g,a (r_g,a = 18 r_1 for a 128-BCCA),
-i.e. D/(v_imp dt) = 8 x 18 x (r_1/(v_0 t_c)) / (0.014 v_imp/v_0) steps, r_1/(v_0 t_c) = 119 (ice) or 1141 (quartz):
-summed over 16 log-spaced speeds 0.14-18 v_0 (sum v_0/v_imp = 22.6) that is 2.8e7 steps per ice structure and
-2.6e8 per quartz structure, x 2 xi_crit x 3 structures = 1.7e9 steps ~ 2e6 s ~ 23 days of one core at dt = 0.014 t_c
-(~6 days at dt = 0.056 t_c). Not runnable here.
+30 A), 3 structures, v_imp from 0.14 to 18 v_0 (~16 speeds), dt = 0.014 t_c. Not runnable here. A collision lasts
+until the aggregates have passed through each other, a relative displacement D ~ 8 r_g,a (r_g,a = 18 r_1 for a
+128-BCCA), i.e. D/(v_imp dt) = 8 x 18 x (r_1/(v_0 t_c)) / (0.014 v_imp/v_0) steps with r_1/(v_0 t_c) = 119 (ice) or
+1141 (quartz); over 16 log-spaced speeds 0.14-18 v_0 (sum v_0/v_imp = 22.6) that is 2.8e7 steps per ice structure
+and 2.6e8 per quartz structure, x 2 xi_crit x 3 structures = 1.8e9 steps of 256 monomers. Measured on this machine
+(2 cores shared by 5 jobs, load 13-18): 1.4e5 monomer-steps/s over the reduced sweep (0.95e5 at N_total = 64,
+1.9e5 at 256; ~90 s of compilation per size), so the paper's sweep would take ~37 days here (the script prints
+this projection from the rate it measured).
 
-Reduced sweep (full mode of this script, ~20 min here): N_total = 64 (32 + 32), ice with xi_crit = 30 A (2 structures,
-v_imp = 1-18 v_0, 8 speeds: x_roll 0.003-0.93, x_break 0.08-26) and ice 2 A (1 structure, v_imp = 1, 2, 3, 4.9, 8 v_0:
-x_roll 0.04-2.8); quartz is left out (10x the steps). dt = 0.056 t_c (the paper went up to 0.112 t_c for its large runs,
-with energy errors < 1e-3, §4); each run lasts t_gap + 8 r_g,a/v_imp, split in two halves whose outcomes are compared
-(a run is "settled" when N_large is unchanged, n_con changed by < 0.03 and r_g by < 3 % over the second half); the
-energy error max|E_total - E_total(0)|/E_imp of every run is kept. What this size can test (Wada et al. §5.3, eq. 57:
-n_con is size-independent only for N_total >= 256 and lower for 16 and 64): no restructuring below E_roll, the
-r_g law (51) only over E_roll < E_imp < 0.1 n_k E_roll, which is 0.8 decade at n_k = 62 (1.4 at 254); the disruption
-thresholds in x_break; n_con - 1 = x_roll^0.75 only approximately (the paper's own N_total = 64 curve lies lower).
-Results are cached in ``figW07_W11_W14_sweep.json`` (per collision, added as they finish; a rerun skips the done
-ones), so the figures are redrawn without rerunning.
+Reduced sweep (full mode of this script; measured 1287 s of runs for the first 24 collisions, ~30 min in all):
+* N_total = 64 (32 + 32): ice 30 A, 2 structures, v_imp = 1-18 v_0 (8 speeds, 7 for the second structure;
+  x_roll 0.003-0.93, x_break 0.08-27); ice 2 A, 1 structure, v_imp = 1, 2, 3, 4.9, 8 v_0 (x_roll 0.04-2.8);
+* N_total = 256 (128 + 128): ice 30 A, 2 structures, v_imp = 1.5, 2.3, 3.5, 5.3 v_0 (x_roll 0.006-0.08: the range
+  E_roll < E_imp < 0.1 n_k E_roll of eq. 51 and eq. 56, x_break <= 2.3: no disruption);
+* quartz is left out (10x the steps of ice at equal v_imp/v_0).
+dt = 0.056 t_c (the paper went up to 0.112 t_c for its large runs, with energy errors < 1e-3, §4); each run lasts
+t_gap + 8 r_g,a/v_imp, split in two halves whose outcomes are compared (a run is "settled" when N_large is
+unchanged, n_con changed by < 0.03 and r_g by < 3 % over the second half; the fraction is printed); the energy
+error max|E_total - E_total(0)|/E_imp of every run is kept (printed, not counted: 2.2e-3 at most, in the shattering
+runs at 18 v_0).
+What each size can test (Wada et al. §5.2-5.3): at N_total = 64 the r_g slope is only required to be shallower than
+eq. 51's (small BCCAs start more compact, Fig. 8), eq. 56 and "n_con ~ 1 below E_roll" are printed but not counted
+(n_con is lower for N_total = 16 and 64, eq. 57), the disruption thresholds in x_break are counted (brackets between
+grid speeds) and so is r_g ~ r_1 sqrt(N_large) at x_roll ~ 1 (ice 2 A); at N_total = 256 the spec's bands of eqs. 51
+and 56 are counted. Measured disagreement: the eq. 56 exponent at N_total = 256 is 0.46 (paper 0.75 +- 0.15):
+n_con - 1 grows more slowly and lies above x_roll^0.75 for x_roll < 0.1.
+Results are cached in ``<out>/figW07_W11_W14_sweep.json`` (per collision, written as they finish; a rerun skips the
+done ones), so the figures are redrawn without rerunning.
 
 Quick mode (the default test): N_total = 16 (8 + 8), dt = 0.112 t_c, runs of t_gap + 4 r_g,a/v_imp, three
 collisions: ice 30 A at 1 v_0 (E_imp = 0.045 E_roll: n_con ~ 1, within 0.2 since one contact is 1/16 here, and r_g
@@ -53,7 +62,7 @@ SETS = {"quartz 2 A": ("quartz", 2e-8, "s", "k"), "quartz 30 A": ("quartz", 3e-7
 FULL_PLAN = [("ice 30 A", 32, (0,), (1.0, 1.51, 2.28, 3.44, 5.2, 7.86, 11.9, 18.0)),
              ("ice 2 A", 32, (0,), (1.0, 2.0, 3.0, 4.9, 8.0)),
              ("ice 30 A", 32, (1,), (18.0, 11.9, 7.86, 5.2, 3.44, 2.28, 1.51)),
-             ("ice 30 A", 128, (0,), (5.3, 3.5, 2.3, 1.5))]
+             ("ice 30 A", 128, (0, 1), (5.3, 3.5, 2.3, 1.5))]
 QUICK_PLAN = [("ice 30 A", 8, (0,), (1.0,)), ("ice 2 A", 8, (0,), (2.0, 18.0))]
 #: full sweep (paper): for the projected cost in the output
 PAPER_SPEEDS = 16
