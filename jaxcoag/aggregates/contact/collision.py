@@ -15,8 +15,9 @@ contact event and r_g,tot the gyration radius of the two placed aggregates toget
 
 The same run is an engine of the one API: ``jaxcoag.evolve(material, DEM(...), Collision(a, b, v_imp), t_out)``
 (``t_out`` [s] are the times of the energy record; checkpoint/resume, Ctrl-C and progress come with
-``checkpoint=`` / ``progress=``). ``collide`` runs that engine segment by segment, checking the stop criterion
-between segments.
+``checkpoint=`` / ``progress=``). ``collide`` runs that engine through the same segment driver
+(:func:`jaxcoag.checkpoint.run_segments`), whose adaptive-end hook checks the stop criterion between segments, so
+``collide(..., checkpoint=path)`` checkpoints and resumes like ``evolve``.
 
 References: Wada, Tanaka, Suyama, Kimura & Yamamoto (2007, ApJ 661, 320) §4 (set-up, dt = 0.014 t_c), §5.1
 (eq. 50, n_con, N_large), Fig. 6 (energy budget).
