@@ -40,6 +40,7 @@ stop at an output time and a restart redraw the crossing event identically).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import enum
 import functools
@@ -249,12 +250,15 @@ def fingerprint(*objects) -> str:
     return h.h.hexdigest()
 
 
-def run_fingerprint(kernel, engine, initial, t_out, *, t0, outcome, key) -> str:
+def run_fingerprint(kernel, engine, initial, t_out, *, t0, outcome, key, until=None) -> str:
     """The fingerprint a checkpoint of this run carries: engine, kernel, initial condition,
-    outcome, output times [s] (as float64), t0 [s] and key (structure and numbers).
+    outcome, output times [s] (as float64), t0 [s] and key (structure and numbers), and the
+    adaptive-end predicate ``until`` of :func:`run_segments` when there is one (its class and
+    fields; without one the fingerprint is that of a run with fixed output times).
     A checkpoint whose fingerprint differs is refused on resume."""
-    return fingerprint(FORMAT, engine, kernel, initial, outcome,
-                       np.asarray(t_out, np.float64), None if t0 is None else float(t0), key)
+    parts = (FORMAT, engine, kernel, initial, outcome, np.asarray(t_out, np.float64),
+             None if t0 is None else float(t0), key)
+    return fingerprint(*parts) if until is None else fingerprint(*parts, ("until", until))
 
 
 # ---------------------------------------------------------------------------------------- file format
@@ -497,7 +501,7 @@ def _concat(a, b):
 
 
 def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint=None, every=1, resume=True,
-                 progress=False, max_segments=None, desc="jaxcoag run"):
+                 progress=False, max_segments=None, desc="jaxcoag run", until=None):
     """Advance any engine segment by segment, with an atomic checkpoint after every segment.
 
     This is what ``jaxcoag.evolve(..., checkpoint=..., progress=..., max_segments=...)`` runs (its
@@ -519,11 +523,21 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
         max_segments: advance at most this many new segments, then return the outputs so far
             (the result's ``.t`` ends at the last completed output; a later call continues).
         desc: label of the progress bar.
+        until: adaptive end: a predicate ``until(state) -> bool`` of the engine state, evaluated on
+            the host after every completed segment (after its checkpoint is written) and on the
+            state read from a checkpoint before resuming; True ends the run there, so ``t_out`` is
+            then the longest run allowed (e.g. ``contact.collide``: contact plus 8 r_g,tot/v_imp
+            and quiet steps). It must be a function of the state alone (deterministic), and it
+            enters the run fingerprint (:func:`run_fingerprint`: make it an equinox Module or a
+            dataclass whose fields are its parameters), so a checkpoint written under another end
+            criterion is refused. None: run to ``t_out[-1]``.
 
     Returns:
         the engine's result (``engine._result``) over the completed outputs. The run stops after
         the first segment whose status is a failure (:data:`jaxcoag.FAILURES`); that segment is
-        checkpointed too, so resuming returns the same failed result without redoing it.
+        checkpointed too, so resuming returns the same failed result without redoing it. With
+        ``until`` it also stops after the first segment whose state satisfies ``until`` (a caller
+        tells this end from the end of ``t_out`` by evaluating ``until`` on the final state).
 
     Raises:
         :class:`RunInterrupted` on Ctrl-C, after writing the completed segments atomically.
@@ -539,7 +553,8 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
     bounds = list(range(0, T, every)) + [T]
     n_seg = len(bounds) - 1
     path = None if checkpoint is None else os.fspath(checkpoint)
-    fp = None if path is None else run_fingerprint(kernel, engine, initial, t_np, t0=t0, outcome=outcome, key=key)
+    fp = None if path is None else run_fingerprint(kernel, engine, initial, t_np, t0=t0, outcome=outcome, key=key,
+                                                   until=until)
     t_arr = jnp.asarray(t_np)
 
     resuming = resume and path is not None and os.path.exists(path)
@@ -563,6 +578,7 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
             walls = [float(w) for w in np.atleast_1d(ck["meta"].get("wall_s", []))]
     failures = _failure_codes()
     failed = outs is not None and bool(set(_codes(outs).tolist()) & failures)
+    ended = until is not None and outs is not None and bool(until(state))
 
     def seg_done(n):  # completed segments of this segmentation after n outputs
         return sum(1 for k in range(n_seg) if bounds[k + 1] <= n) if n < T else n_seg
@@ -573,12 +589,12 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
              meta={"wall_s": np.asarray(w, np.float64), "every": every, "n_out": T})
 
     rec = (state, outs, n_done, walls)  # the completed run so far, replaced in one assignment
-    bar = tqdm(total=n_seg, initial=seg_done(n_done), disable=not progress, file=sys.stderr, unit="seg", desc=desc,
-               dynamic_ncols=True, leave=True)
+    bar = tqdm(total=None if until is not None else n_seg, initial=seg_done(n_done), disable=not progress,
+               file=sys.stderr, unit="seg", desc=desc, dynamic_ncols=True, leave=True)
     new = 0
     try:
-        while n_done < T and not failed and (max_segments is None or new < max_segments):
-            hi = next(b for b in bounds if b > n_done)
+        while n_done < T and not failed and not ended and (max_segments is None or new < max_segments):
+            hi = bounds[bisect.bisect_right(bounds, n_done)]
             w0 = time.perf_counter()
             state1, out = engine._advance(kernel, state, t_arr[n_done:hi], outcome)
             state1, out = jax.block_until_ready((state1, out))
@@ -594,6 +610,7 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
             extra = info_fn(prev, state, out, wall) if info_fn is not None else ""
             bar.set_postfix_str(f"t = {t_np[hi - 1] / yr:.4g} yr" + (f", {extra}" if extra else ""), refresh=False)
             bar.update(1)
+            ended = until is not None and bool(until(state))
     except KeyboardInterrupt as e:
         saved = None
         if path is not None and rec[2] > 0:

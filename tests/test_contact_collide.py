@@ -144,6 +144,103 @@ def test_evolve_checkpoint_resume_is_bit_identical(pair8, tmp_path):
         assert np.array_equal(np.asarray(getattr(res, name)), np.asarray(getattr(full, name))), name
 
 
+# ---------------------------------------------------------------------------------------- collide checkpoints
+# The default end (contact + 8 r_g,tot/v_imp, then quiet steps) of the 8 + 8 pair at 6 v0 with dt = 0.112 t_c (the
+# largest step of Wada et al. 2007 §4): ~1e4 steps in segments of 25 records (1100 steps), same compiled program as
+# run8 (16 planar monomers, 25 records per segment).
+DT_FAST = 0.112 * TC
+QUIET = 4000
+
+
+@pytest.fixture(scope="module")
+def adaptive_full(pair8, tmp_path_factory):
+    a, b = pair8
+    path = tmp_path_factory.mktemp("collide_ck") / "full.npz"
+    return contact.collide(a, b, V_IMP, MAT, dt=DT_FAST, quiet_steps=QUIET, checkpoint=path), path
+
+
+def _same(r1, r2):
+    for name in ("t", "E_total", "E_kin", "U", "E_dis_n", "E_dis_s", "E_dis_r", "P", "L", "contacts", "positions",
+                 "velocities", "omega", "labels", "cluster_sizes", "r_g", "n_steps"):
+        assert np.array_equal(np.asarray(getattr(r1, name)), np.asarray(getattr(r2, name))), name
+
+
+def test_collide_adaptive_end_is_the_first_segment_past_the_criterion(adaptive_full):
+    """The until-hook of run_segments ends collide at the first segment end (1100 steps apart) where
+    t >= t_contact + 8 r_g,tot/v_imp and >= QUIET steps have passed since the last contact event (criterion
+    recomputed here from the final state's event record; the segment before fails it)."""
+    r, path = adaptive_full
+    assert r.status == RESULTS.successful
+    st = r.final_state.dem
+    n, first, last = int(st.step), int(st.first_event), int(st.last_event)
+    seg = 25 * int(round((0.05 * R1 / V_IMP + 8 * float(r.final_state.r_g0) / V_IMP) / DT_FAST / 200))
+    t_stop = first * DT_FAST + 8 * float(r.final_state.r_g0) / V_IMP
+    ok = lambda k: k * DT_FAST >= t_stop and k - last >= QUIET  # noqa: E731
+    assert seg == 1100 and n % seg == 0 and ok(n) and not ok(n - seg)
+    assert last > first >= 0 and n - last < QUIET + seg  # the quiet steps, not t_stop, set this end
+    assert r.t.shape == (n // seg * 25,) and float(r.t[-1]) == pytest.approx(n * DT_FAST, rel=1e-12)
+    e = np.asarray(r.E_total)
+    # dt = 0.112 t_c, the paper's coarsest step: measured 1.8e-3 of E_imp (3.4e-5 at 0.014 t_c, run8)
+    assert np.max(np.abs(e - e[0])) / float(r.E_imp) < 5e-3
+    info = jaxcoag.checkpoint.read_info(path)
+    assert info["n_done"] == r.t.shape[0]
+
+
+def test_collide_resume_after_interrupt_is_bit_identical(pair8, adaptive_full, tmp_path, monkeypatch):
+    """Ctrl-C during the 4th segment (simulated: _advance raises KeyboardInterrupt) leaves a checkpoint of 3
+    segments; collide(..., checkpoint=) resumes from it to the uninterrupted result bit for bit. A completed
+    checkpoint (its state already past the end criterion) returns the result again without a single step."""
+    a, b = pair8
+    full, full_path = adaptive_full
+    ck = tmp_path / "ck.npz"
+    advance = C.DEM._advance
+    calls = []
+
+    def interrupting(self, *args):
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return advance(self, *args)
+
+    monkeypatch.setattr(C.DEM, "_advance", interrupting)
+    with pytest.raises(jaxcoag.checkpoint.RunInterrupted) as exc:
+        contact.collide(a, b, V_IMP, MAT, dt=DT_FAST, quiet_steps=QUIET, checkpoint=ck)
+    assert exc.value.segments_done == 3 and exc.value.checkpoint == str(ck)
+    assert jaxcoag.checkpoint.read_info(ck)["n_done"] == 75
+    monkeypatch.setattr(C.DEM, "_advance", advance)
+    res = contact.collide(a, b, V_IMP, MAT, dt=DT_FAST, quiet_steps=QUIET, checkpoint=ck)
+    _same(res, full)
+
+    def no_steps(self, kernel, state, *args):  # tracing (jax.eval_shape of the outputs' structure) is allowed
+        if not isinstance(state.v_imp, jax.core.Tracer):
+            raise AssertionError("a completed checkpoint must not be advanced")
+        return advance(self, kernel, state, *args)
+
+    monkeypatch.setattr(C.DEM, "_advance", no_steps)
+    _same(contact.collide(a, b, V_IMP, MAT, dt=DT_FAST, quiet_steps=QUIET, checkpoint=full_path), full)
+
+
+def test_collide_refuses_a_checkpoint_of_another_collision(pair8, adaptive_full, monkeypatch):
+    """Another impact speed, another rotation key, another end criterion (quiet_steps) or record spacing: refused
+    with the fingerprint message before any step; the file is left as it was."""
+    a, b = pair8
+    _, path = adaptive_full
+    before = path.read_bytes()
+
+    def no_steps(self, *args):
+        raise AssertionError("refused runs must not step")
+
+    monkeypatch.setattr(C.DEM, "_advance", no_steps)
+    for kw in (dict(v_imp=1.01 * V_IMP), dict(key=jax.random.key(5)), dict(quiet_steps=QUIET + 1),
+               dict(record_every=43)):
+        args = dict(v_imp=V_IMP, dt=DT_FAST, quiet_steps=QUIET) | kw
+        with pytest.raises(JaxcoagInputError, match="different run configuration"):
+            contact.collide(a, b, args.pop("v_imp"), MAT, checkpoint=path, **args)
+    assert path.read_bytes() == before
+    with pytest.raises(JaxcoagInputError, match="existing directory"):
+        contact.collide(a, b, V_IMP, MAT, checkpoint=path.parent / "missing" / "ck.npz")
+
+
 # ---------------------------------------------------------------------------------------- bad input
 def test_bad_inputs_are_refused_before_any_work(pair8):
     a, b = pair8

@@ -15,8 +15,9 @@ contact event and r_g,tot the gyration radius of the two placed aggregates toget
 
 The same run is an engine of the one API: ``jaxcoag.evolve(material, DEM(...), Collision(a, b, v_imp), t_out)``
 (``t_out`` [s] are the times of the energy record; checkpoint/resume, Ctrl-C and progress come with
-``checkpoint=`` / ``progress=``). ``collide`` runs that engine segment by segment, checking the stop criterion
-between segments.
+``checkpoint=`` / ``progress=``). ``collide`` runs that engine through the same segment driver
+(:func:`jaxcoag.checkpoint.run_segments`), whose adaptive-end hook checks the stop criterion between segments, so
+``collide(..., checkpoint=path)`` checkpoints and resumes like ``evolve``.
 
 References: Wada, Tanaka, Suyama, Kimura & Yamamoto (2007, ApJ 661, 320) §4 (set-up, dt = 0.014 t_c), §5.1
 (eq. 50, n_con, N_large), Fig. 6 (energy budget).
@@ -486,10 +487,56 @@ class CollisionResult(eqx.Module):
         return ds
 
 
+#: CollisionResult fields with one entry per record (leading axis = t).
+_RECORDS = ("t", "E_kin", "E_kin_rot", "U", "E_dis_n", "E_dis_s", "E_dis_r", "E_dis_t", "E_total", "P", "L", "contacts")
+
+
+class _CollideEnd(eqx.Module):
+    """Adaptive end of :func:`collide` (the ``until`` predicate of :func:`jaxcoag.checkpoint.run_segments`),
+    evaluated on the host on the engine state after each segment.
+
+    True when the DEM flags are set (capacity overflow or NaN/inf: the run stops there), or, for the default end
+    (``fixed = False``), when t >= t_contact + 8 r_g,tot/v_imp (t_contact = the first contact event, or
+    ``t_gap`` = gap/v_imp before any) and at least ``quiet_steps`` steps have passed since the last contact
+    creation or breaking. With ``fixed = True`` (``collide(t_end=...)``) only the flags end the run early.
+
+    Fields (Python numbers, so that they enter a checkpoint's run fingerprint exactly): fixed (bool), dt [s],
+    t_gap [s], r_g0 (r_g,tot of the placed pair) [cm], v_imp [cm s^-1], quiet_steps [steps].
+    """
+
+    fixed: bool
+    dt: float
+    t_gap: float
+    r_g0: float
+    v_imp: float
+    quiet_steps: int
+
+    def t_stop(self, state) -> float:
+        """t_contact + 8 r_g,tot/v_imp [s] of the state's run (Wada et al. 2007 §4 set-up; our default end)."""
+        first = int(state.dem.first_event)
+        t_contact = first * self.dt if first >= 0 else self.t_gap
+        return t_contact + 8.0 * self.r_g0 / self.v_imp
+
+    def __call__(self, state) -> bool:
+        st = state.dem
+        if int(st.flags):
+            return True
+        if self.fixed:
+            return False
+        step = int(st.step)
+        return step * self.dt >= self.t_stop(state) and step - int(st.last_event) >= self.quiet_steps
+
+
 def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None, dt=None, capacity=None,
             neighbours=None, inelastic=True, record_every=None, quiet_steps=10_000, max_steps=None, gap=None,
-            throw=True) -> CollisionResult:
+            throw=True, checkpoint=None, resume=True, progress=False) -> CollisionResult:
     """Collide two aggregates and run until the outcome settles (Wada et al. 2007 §4).
+
+    The run goes in segments of 25 records through :func:`jaxcoag.checkpoint.run_segments` (the segment driver of
+    ``jaxcoag.evolve``), whose adaptive-end predicate checks the default end between segments; with
+    ``checkpoint=`` the state is written atomically after every segment, and a run interrupted by Ctrl-C
+    (:class:`jaxcoag.checkpoint.RunInterrupted`) or killed resumes from the last segment to a result bit-identical
+    to the uninterrupted one (same backend and JAX version).
 
     Arguments:
         a, b: :class:`Aggregate` s (same dimension and r1 as ``material``); a starts on the left.
@@ -503,16 +550,31 @@ def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None
         inelastic: inelastic sliding/rolling/twisting (default True).
         record_every: steps between records of the energy budget; None: about 200 records over the default run.
         quiet_steps: steps without contact creation or breaking required before the default end (1e4).
-        max_steps: step budget of the default end (None: 20x the estimated run + 1e5); status
-            ``max_steps_reached`` when spent.
+        max_steps: step budget of the default end (None: 20x the estimated run + 1e5), rounded up to whole
+            segments of 25 records; status ``max_steps_reached`` when spent.
         gap: initial gap of the closest pair [cm] (None: 0.05 r1).
         throw: raise on a failure status (``nonfinite``, ``max_steps_reached``) and on ``capacity_exceeded``.
+        checkpoint: path of a checkpoint file (``.npz``; its directory must exist), written atomically after every
+            segment (None: no file). The run's fingerprint covers the material, the DEM settings, the placed
+            (rotated) aggregates, v_imp, impact parameter, gap, the record times (record_every, t_end or
+            max_steps) and the end criterion (quiet_steps); a checkpoint of another collision is refused before
+            any work.
+        resume: continue from ``checkpoint`` when it exists (True, the default of ``jaxcoag.evolve``); False
+            starts afresh and overwrites it.
+        progress: a progress bar over the segments (stderr; steps per second and contacts).
 
     Returns:
         :class:`CollisionResult`.
 
+    Raises:
+        :class:`jaxcoag.checkpoint.RunInterrupted` on Ctrl-C (after writing the completed segments).
+
     References: Wada et al. (2007) §4, §5.1, Fig. 6.
     """
+    import os
+
+    from ...checkpoint import run_segments
+
     require_x64("contact.collide")
     coll = Collision(a, b, v_imp, impact_parameter, gap)  # checks a, b before they are rotated
     if key is not None:
@@ -524,58 +586,47 @@ def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None
         te = np.asarray(t_end, np.float64)
         if te.ndim != 0 or not (np.isfinite(te) and te > 0):
             raise JaxcoagInputError(f"t_end must be a run length > 0 in s (or None); got {t_end!r}.")
+    if checkpoint is not None:
+        cp = os.path.abspath(os.fspath(checkpoint))
+        if os.path.isdir(cp) or not os.path.isdir(os.path.dirname(cp)):
+            raise JaxcoagInputError(f"checkpoint={checkpoint!r} must be a file path in an existing directory (the "
+                                    "checkpoint is written there after every segment); create the directory or "
+                                    "change the path.")
     engine._check(material, coll, None, 0.0, None, None)
     dt_s = float(engine._dt(material))
-    state = engine._init(material, coll, 0.0, None, None)
+    r_g0 = float(_place(coll, material.r1)[2])
     v = float(coll.v_imp)
     t_gap = (0.05 * float(material.r1) if gap is None else float(gap)) / v
-    n_est = (t_gap + 8.0 * float(state.r_g0) / v) / dt_s if t_end is None else float(t_end) / dt_s
+    n_est = (t_gap + 8.0 * r_g0 / v) / dt_s if t_end is None else float(t_end) / dt_s
     every = int(record_every) if record_every is not None else max(1, int(round(n_est / 200)))
     if every < 1:
         raise JaxcoagInputError(f"record_every must be a positive int (steps); got {record_every!r}.")
-    budget = int(max_steps) if max_steps is not None else int(20 * n_est + 1e5)
     seg = 25  # records per segment
-    outs, t_all, k = [], [], 0
-    status_override = None
-    n_end = None if t_end is None else max(1, int(round(float(t_end) / dt_s)))
-    while True:
-        if n_end is not None:
-            targets = [min((k + i + 1) * every, n_end) for i in range(seg)]
-        else:
-            targets = [(k + i + 1) * every for i in range(seg)]
-        t_seg = jnp.asarray(targets, jnp.float64) * dt_s
-        state, out = engine._advance(material, state, t_seg, None)
-        outs.append(out)
-        t_all.append(np.asarray(t_seg))
-        k += seg
-        st = state.dem
-        step = int(st.step)
-        if int(st.flags):
-            break
-        if n_end is not None:
-            if step >= n_end:
-                break
-            continue
-        first = int(st.first_event)
-        t_contact = first * dt_s if first >= 0 else t_gap
-        t_stop = t_contact + 8.0 * float(state.r_g0) / v
-        if step * dt_s >= t_stop and step - int(st.last_event) >= quiet_steps:
-            break
-        if step >= budget:
-            status_override = RESULTS.max_steps_reached
-            break
-    out = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *outs)
-    t = np.concatenate(t_all)
-    if n_end is not None:  # drop the repeated records past t_end
-        _, keep = np.unique(t, return_index=True)
-        t = t[keep]
-        out = jax.tree_util.tree_map(lambda x: x[keep], out)
+    if t_end is not None:  # records every `every` steps up to the step of t_end (the last one at t_end), the last
+        # segment padded with repeats of t_end (no steps) so that every segment has the same length (one compiled
+        # program); the repeats are dropped from the result
+        n_end = max(1, int(round(float(t_end) / dt_s)))
+        n_rec = -(-n_end // every)
+        steps = np.minimum(np.arange(1, seg * -(-n_rec // seg) + 1, dtype=np.int64) * every, n_end)
+    else:  # whole segments until the step budget is spent
+        budget = int(max_steps) if max_steps is not None else int(20 * n_est + 1e5)
+        if budget < 1:
+            raise JaxcoagInputError(f"max_steps must be a positive int (steps); got {max_steps!r}.")
+        steps = np.arange(1, seg * -(-budget // (seg * every)) + 1, dtype=np.int64) * every
+    t_out = steps.astype(np.float64) * dt_s
+    end = _CollideEnd(fixed=t_end is not None, dt=dt_s, t_gap=t_gap, r_g0=r_g0, v_imp=v, quiet_steps=int(quiet_steps))
     with warnings.catch_warnings():
         if throw:  # a capacity overflow raises below instead of warning
             warnings.simplefilter("ignore", RuntimeWarning)
-        res = engine._result(material, t, out, state, None)
-    if status_override is not None:
-        res = eqx.tree_at(lambda r: r.status, res, status_override)
+        res = run_segments(material, engine, coll, t_out, t0=0.0, outcome=None, key=None, checkpoint=checkpoint,
+                           every=seg, resume=resume, progress=progress, desc="contact.collide", until=end)
+    if t_end is not None:  # drop the repeated records at t_end
+        _, keep = np.unique(np.asarray(res.t), return_index=True)
+        if keep.size < res.t.shape[0]:
+            res = eqx.tree_at(lambda r: [getattr(r, n) for n in _RECORDS], res,
+                              [getattr(res, n)[keep] for n in _RECORDS])
+    if t_end is None and not end(res.final_state) and not bool(is_failure(res.status)):
+        res = eqx.tree_at(lambda r: r.status, res, RESULTS.max_steps_reached)
     if throw:
         flags = int(res.final_state.dem.flags)
         if flags & (_dem.FLAG_CONTACTS | _dem.FLAG_NEIGHBOURS):
