@@ -10,7 +10,7 @@ shapes and static fields, so the timed runs reuse its program), then each seed's
 ``figR04_R08_runs.json``, which records them with the load average) instead of running them again, and runs
 only the models missing there. The JSON records, per model, where its numbers come from.
 
-    python benchmarks/rigid_models.py [--quick] [--models i,ii,iii,iv] [--reuse paper_figs/out/figR04_R08_runs.json]
+    python benchmarks/rigid_models.py [--quick] [--models i,ii,iii,iv] [--seeds 1,2,3] [--reuse RUNS_JSON] [--out PATH]
 
 Writes benchmarks/results/rigid_models.json (``--quick``: rigid_models_quick.json: N0 = 100, seed 1, T = 2)
 and prints a table. The machine is shared: wall times are upper bounds; the 1-min load average before and
@@ -53,6 +53,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="N0 = 100, seed 1, T = 2 (a smoke run)")
     ap.add_argument("--models", default="i,ii,iii,iv", help="comma-separated subset of i,ii,iii,iv")
+    ap.add_argument("--seeds", default=None, help="comma-separated seeds (default 1,2,3; --quick: 1)")
     ap.add_argument("--reuse", type=pathlib.Path, default=None,
                     help="runs JSON of paper_figs/figR04_R08_models.py (full mode) whose timings to take")
     ap.add_argument("--out", type=pathlib.Path, default=None, help="output JSON (default benchmarks/results/...)")
@@ -68,6 +69,11 @@ def main(argv=None):
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     n0, seeds, T = (100, [1], 2.0) if args.quick else (1000, [1, 2, 3], 8.2)
+    if args.seeds is not None:
+        try:
+            seeds = [int(x) for x in args.seeds.split(",")]
+        except ValueError:
+            raise SystemExit(f"--seeds must be comma-separated ints; got {args.seeds!r}.") from None
     RM.check_setup(models, n0, seeds, T)
     reused = {}
     if args.reuse is not None:
