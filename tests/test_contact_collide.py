@@ -177,7 +177,9 @@ def test_collide_adaptive_end_is_the_first_segment_past_the_criterion(adaptive_f
     t_stop = first * DT_FAST + 8 * float(r.final_state.r_g0) / V_IMP
     ok = lambda k: k * DT_FAST >= t_stop and k - last >= QUIET  # noqa: E731
     assert seg == 1100 and n % seg == 0 and ok(n) and not ok(n - seg)
-    assert last > first >= 0 and n - last < QUIET + seg  # the quiet steps, not t_stop, set this end
+    # contact events happened; which of the two conditions binds depends on the trajectory (with the event-time
+    # correction of dem.py the last event is at step 2946 and t_stop binds: ok(n - seg) fails on time)
+    assert last > first >= 0
     assert r.t.shape == (n // seg * 25,) and float(r.t[-1]) == pytest.approx(n * DT_FAST, rel=1e-12)
     e = np.asarray(r.E_total)
     # dt = 0.112 t_c, the paper's coarsest step: measured 1.8e-3 of E_imp (3.4e-5 at 0.014 t_c, run8)
