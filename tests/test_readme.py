@@ -87,8 +87,11 @@ def test_readme_has_checked_numbers():
 # Blocks run only with `-m slow` (default-suite budget), named by a string unique to each, with the
 # default tests that cover the same code: the DG sum-kernel accuracy and gradient block (35 s on 2 cores)
 # <- tests/test_binned_dg.py (DG against the analytic sum-kernel solution, mass to round-off) and
-# tests/test_binned_gradients.py::test_reverse_and_forward_vs_fd (gradients through the solve).
-SLOW_BLOCKS = ("jax.grad(log_peak)",)
+# tests/test_binned_gradients.py::test_reverse_and_forward_vs_fd (gradients through the solve); the one-verb block
+# with both engines on the constant kernel (26 s) <- tests/test_one_api.py::
+# test_both_engines_match_the_constant_kernel_solution (the same engines, kernel and start against the exact moments
+# and spectrum).
+SLOW_BLOCKS = ("jax.grad(log_peak)", "rm = jc.evolve(kernel, mc, start, t_out, key=key)")
 
 
 def _param(start, src):
