@@ -38,8 +38,13 @@ Numerical scheme (one synchronized global time; all arrays have the fixed capaci
   in O(n0), or by an all-pairs scan when the cutoff exceeds L/3. It is rebuilt when a sphere may have
   moved (or, in model ii, grown) by skin/2 since the last build, so no contact can be missed; overflow of
   K or of a cell stops the run with status ``capacity_exceeded`` (raise ``neighbors`` /
-  ``cell_capacity``). Cost per collision and per step is therefore O(n0) with a small constant for the
-  global move and O(K) per sphere for the gaps.
+  ``cell_capacity``; :attr:`BoxResult.status_message` and a warning say which). The candidate width per
+  cell follows the fullest cell (2, 4, ... up to ``cell_capacity``). Models (iii)-(v) keep the list's pairs
+  once (s < t) in a compact pair list and scan only the pairs in use; rotation touches only live
+  aggregates and spinning spheres. A step therefore costs O(n0) with a small constant (sphere positions,
+  the global move, the displacement test) plus O(pairs in use); the number of steps per unit time grows
+  with n0 as well (one global time), so the cost per unit simulated time grows faster than n0
+  (``benchmarks/rigid_scaling.py`` measures it).
 * Periodic images: minimum image per sphere pair (valid because the cutoff is below L/2); contacts of an
   aggregate with its own image are not detected (spec A4.4; R95 is silent).
 
@@ -60,6 +65,7 @@ Mirtich (1996) (conservative advancement).
 from __future__ import annotations
 
 import math
+import warnings
 
 import equinox as eqx
 import jax
@@ -67,12 +73,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine import AbstractEngine, AbstractResult, evolve
-from ..._status import RESULTS, result_code, result_from_code
+from ..._status import RESULTS, result_code, result_from_code, result_table
 from ..._validate import JaxcoagInputError, is_traced, require_x64
 from . import body
 from . import diagnostics as diag
 
-__all__ = ["Box", "BoxState", "RigidBox", "BoxResult", "box_model", "run", "MODELS"]
+__all__ = ["Box", "BoxState", "RigidBox", "BoxResult", "box_model", "run", "capacity_message", "MODELS"]
 
 #: The five test models of R95 Table I: (n0, r0, T, kind) with kind "fixed" (model i), "grow" (ii),
 #: "stick" (iii) or "threshold" (iv, v).
@@ -287,6 +293,8 @@ class BoxState(eqx.Module):
     ``nmem``, last collision partner ``last``. Spheres: owner ``sph_agg``, body offset ``sph_b``, radius
     ``sph_R``, mass ``sph_m``. Models (i)-(ii) use slot s = sphere s (``sph_b`` = 0). Neighbour list
     ``nb`` (n0, K) (``n0`` = empty) with reference positions ``x_ref`` and radii ``r_ref`` of its build;
+    models (iii)-(v) also keep its pairs s < t once, ``pair_i``/``pair_j`` (capacity n0 K / 2, the first
+    ``n_pairs`` in use, in the row order of ``nb``);
     event-driven predictions ``tc``/``partner`` and the rebuild time ``t_rebuild`` (models i-ii).
     Counters: collisions ``n_c``, first-time collisions ``n_c1``, coagulations ``n_coag``, restitutions
     ``n_rest``, loop iterations ``n_steps``, rebuilds ``n_build``; ``nc_max`` (static) cells per box side; ``flags`` bit 0 log full, bit 1
@@ -312,6 +320,9 @@ class BoxState(eqx.Module):
     sph_R: jax.Array
     sph_m: jax.Array
     nb: jax.Array
+    pair_i: jax.Array
+    pair_j: jax.Array
+    n_pairs: jax.Array
     x_ref: jax.Array
     r_ref: jax.Array
     tc: jax.Array
@@ -354,10 +365,15 @@ def _rot(q):
 
 
 def _sphere_pos(st):
-    """Space positions (wrapped), unwrapped offsets A b and velocities of every sphere."""
-    A = _rot(st.q)[st.sph_agg]  # (n, 3, 3)
-    r = jnp.einsum("nij,nj->ni", A, st.sph_b)
-    w = jax.vmap(body.omega_space)(st.q, st.Pi, st.Ip)[st.sph_agg]
+    """Space positions (wrapped), unwrapped offsets A b and velocities of every sphere.
+
+    The 3x3 products are written as elementwise sums (a batched matrix product of n tiny matrices is
+    several times slower on CPU, and this runs at every step); ω = A diag(1/I_k) Π as in
+    :func:`~jaxcoag.aggregates.rigid.body.omega_space`."""
+    Rm = _rot(st.q)  # (slots, 3, 3)
+    w = jnp.sum(Rm * (st.Pi * body._inv_moments(st.Ip))[:, None, :], axis=-1)[st.sph_agg]
+    A = Rm[st.sph_agg]  # (n, 3, 3)
+    r = jnp.sum(A * st.sph_b[:, None, :], axis=-1)
     x = _wrap(st.X[st.sph_agg] + r, st.par["L"])
     u = st.V[st.sph_agg] + jnp.cross(w, r)
     return x, r, u
@@ -402,15 +418,23 @@ def _build_neighbors(x, R, group, active, L, skin, K, C, nc_max, dynamic=True):
         off = jnp.stack(jnp.meshgrid(jnp.arange(-1, 2), jnp.arange(-1, 2), jnp.arange(-1, 2), indexing="ij"),
                         -1).reshape(27, 3)
 
-        def row(i):
-            c3 = jnp.mod(ci[i][None, :] + off, nc)
-            cc = c3[:, 0] + nc * (c3[:, 1] + nc * c3[:, 2])  # (27,)
-            slot = start[cc][:, None] + jnp.arange(C)[None, :]
-            ok = jnp.arange(C)[None, :] < count[cc][:, None]
-            cand = jnp.where(ok, order[jnp.clip(slot, 0, n - 1)], n).reshape(-1)
-            return select(i, cand)
+        def rows(Cp):  # candidates: the first Cp occupants of each of the 27 cells (Cp >= the fullest cell)
+            def row(i):
+                c3 = jnp.mod(ci[i][None, :] + off, nc)
+                cc = c3[:, 0] + nc * (c3[:, 1] + nc * c3[:, 2])  # (27,)
+                slot = start[cc][:, None] + jnp.arange(Cp)[None, :]
+                ok = jnp.arange(Cp)[None, :] < count[cc][:, None]
+                cand = jnp.where(ok, order[jnp.clip(slot, 0, n - 1)], n).reshape(-1)
+                return select(i, cand)
 
-        nb, over = jax.lax.map(row, idx, batch_size=min(n, 1024))
+            return lambda: jax.lax.map(row, idx, batch_size=min(n, 1024))
+
+        # the candidate width follows the fullest cell (2, 4, 8, ... up to C): the same rows as width C (the
+        # accepted candidates and their order do not depend on the padding), at a cost proportional to it
+        widths = sorted({w for w in (2, 4, 8, 16, 32, 64, 128) if w < C} | {C})
+        cmax = jnp.max(count)
+        pick = jnp.sum(jnp.asarray(widths[:-1], jnp.int32) < cmax).astype(jnp.int32)
+        nb, over = jax.lax.switch(pick, [rows(w) for w in widths])
         return nb, jnp.any(over) | over_cell
 
     def all_pairs(_):
@@ -499,12 +523,15 @@ class RigidBox(AbstractEngine):
         log.update({k: jnp.zeros(self.log_capacity, jnp.int32) for k in _LOG_INT})
         rc = 2 * float(np.max(np.asarray(b.radius))) + float(par["skin"])
         nc_max = int(min(max(math.floor(float(b.L) / rc), 1), 64))
+        npair = 1 if b.kind in _SPHERE_KINDS else max(n * self.neighbors // 2, 1)
         st = BoxState(
             model=b.model, nc_max=nc_max, t=jnp.asarray(t0, f), alive=jnp.ones(n, bool), X=jnp.asarray(b.x, f),
             V=jnp.asarray(b.v, f), q=jnp.tile(jnp.array([1.0, 0, 0, 0], f), (n, 1)), Pi=jnp.zeros((n, 3), f),
             Ip=jnp.stack([Ip1, Ip1, Ip1], -1), M=m, Rmax=R, nmem=jnp.ones(n, jnp.int32),
             last=jnp.full(n, -1, jnp.int32), sph_agg=jnp.arange(n, dtype=jnp.int32), sph_b=jnp.zeros((n, 3), f),
-            sph_R=R, sph_m=m, nb=jnp.full((n, self.neighbors), n, jnp.int32), x_ref=jnp.asarray(b.x, f), r_ref=R,
+            sph_R=R, sph_m=m, nb=jnp.full((n, self.neighbors), n, jnp.int32),
+            pair_i=jnp.zeros(npair, jnp.int32), pair_j=jnp.zeros(npair, jnp.int32), n_pairs=jnp.int32(0),
+            x_ref=jnp.asarray(b.x, f), r_ref=R,
             tc=jnp.full(n, jnp.inf, f), partner=jnp.full(n, n, jnp.int32), t_rebuild=jnp.asarray(-jnp.inf, f),
             n_c=jnp.int32(0), n_c1=jnp.int32(0), n_coag=jnp.int32(0), n_rest=jnp.int32(0), n_steps=jnp.int32(0),
             n_build=jnp.int32(0), flags=jnp.int32(0), n_log=jnp.int32(0), log=log, par=par, key=b.key)
@@ -534,6 +561,26 @@ def _outputs(st, code):
         sph_agg=st.sph_agg, sph_r=jnp.sqrt(jnp.sum(r * r, axis=-1)),
         n_aggregates=jnp.sum(al).astype(jnp.int32), n_c=st.n_c, n_c1=st.n_c1, n_coag=st.n_coag, n_rest=st.n_rest,
         n_steps=st.n_steps, n_build=st.n_build, flags=st.flags, status=code)
+
+
+def capacity_message(flags):
+    """What a ``capacity_exceeded`` status of the rigid box means and which :class:`RigidBox` capacity to raise,
+    from the run's ``flags`` (bit 0: the collision log is full; bit 1: a sphere had more than ``neighbors``
+    neighbours or a grid cell more than ``cell_capacity`` spheres). Empty string if neither bit is set."""
+    flags = int(flags)
+    what = []
+    if flags & 1:
+        what.append("the collision log is full (the run went on with exact counters, later collisions are not "
+                    "logged): raise RigidBox(log_capacity=...) (default 20000) above the expected number of "
+                    "collisions")
+    if flags & 2:
+        what.append("a sphere had more neighbours within R_s + R_t + skin than the Verlet list holds, or a grid cell "
+                    "more spheres than it holds, so contacts could be missed and the run stopped at that step "
+                    "(later outputs repeat it): raise RigidBox(neighbors=...) (default 48) and "
+                    "RigidBox(cell_capacity=...) (default 16), or lower RigidBox(skin=...)")
+    if not what:
+        return ""
+    return "Rigid box (jaxcoag.aggregates.rigid) status capacity_exceeded: " + "; ".join(what) + "."
 
 
 def _status_code(st):
@@ -706,10 +753,57 @@ def _sphere_loop(engine, st, t_seg, nc_max):
 
 # ------------------------------------------------------------------------------------------------ aggregates (iii-v)
 def _agg_rebuild(engine, st, x, nc_max):
-    nb, over = _build_neighbors(x, st.sph_R, st.sph_agg, jnp.ones(x.shape[0], bool), st.par["L"], st.par["skin"],
+    n = x.shape[0]
+    nb, over = _build_neighbors(x, st.sph_R, st.sph_agg, jnp.ones(n, bool), st.par["L"], st.par["skin"],
                                 engine.neighbors, engine.cell_capacity, nc_max, dynamic=False)
-    return eqx.tree_at(lambda s: (s.nb, s.x_ref, s.n_build, s.flags), st,
-                       (nb, x, st.n_build + 1, st.flags | jnp.where(over, 2, 0)))
+    # each pair once (s < t), in the row-major order of nb: the list is symmetric, so this is every pair
+    P = st.pair_i.shape[0]
+    rows = jnp.broadcast_to(jnp.arange(n, dtype=jnp.int32)[:, None], nb.shape).reshape(-1)
+    cols = nb.reshape(-1)
+    keep = (cols < n) & (cols > rows)
+    pos = jnp.cumsum(keep) - 1
+    tgt = jnp.where(keep, pos, P)
+    pair_i = jnp.zeros(P, jnp.int32).at[tgt].set(rows, mode="drop")
+    pair_j = jnp.zeros(P, jnp.int32).at[tgt].set(cols, mode="drop")
+    n_pairs = jnp.minimum(jnp.sum(keep), P).astype(jnp.int32)
+    return eqx.tree_at(lambda s: (s.nb, s.pair_i, s.pair_j, s.n_pairs, s.x_ref, s.n_build, s.flags), st,
+                       (nb, pair_i, pair_j, n_pairs, x, st.n_build + 1, st.flags | jnp.where(over, 2, 0)))
+
+
+def _pair_scan(st, x, u, acc, tol, chunk=2048):
+    """Gaps of the listed pairs of spheres in different aggregates (conservative advancement, module
+    docstring): the smallest safe time t* over them, whether some pair is an event (g <= tol, ġ < 0), and
+    the event pair (s, t) with the most negative ġ (the first one in list order on ties). The pairs are
+    scanned in chunks up to ``n_pairs``, so the cost follows the pairs in use, not the capacity."""
+    P = st.pair_i.shape[0]
+    B = min(P, chunk)
+    L = st.par["L"]
+    lane = jnp.arange(B)
+
+    def one(c, carry):
+        tmin, gbest, ibest = carry
+        p = c * B + lane
+        ok = p < st.n_pairs
+        pc = jnp.where(ok, p, 0)
+        i, j = st.pair_i[pc], st.pair_j[pc]
+        ga, gb = st.sph_agg[i], st.sph_agg[j]
+        valid = ok & (ga != gb)
+        d = _mimg(x[j] - x[i], L)
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        g = dist - (st.sph_R[i] + st.sph_R[j])
+        gdot = jnp.sum(d * (u[j] - u[i]), axis=-1) / jnp.where(dist > 0, dist, 1.0)
+        A = 2.0 * (acc[ga] + acc[gb])
+        ev = valid & (g <= tol) & (gdot < 0)
+        ts = jnp.min(jnp.where(valid, body.safe_time(g, gdot, A), jnp.inf))
+        ge = jnp.where(ev, gdot, jnp.inf)
+        k = jnp.argmin(ge)
+        better = ge[k] < gbest
+        return jnp.minimum(tmin, ts), jnp.where(better, ge[k], gbest), jnp.where(better, pc[k], ibest).astype(jnp.int32)
+
+    nchunk = (st.n_pairs + B - 1) // B
+    inf = jnp.asarray(jnp.inf, jnp.float64)
+    tstar, gbest, ib = jax.lax.fori_loop(0, nchunk, one, (inf, inf, jnp.int32(0)))
+    return tstar, jnp.isfinite(gbest), st.pair_i[ib], st.pair_j[ib]
 
 
 def _agg_event(engine, st, s, t, x, r):
@@ -801,15 +895,31 @@ def _agg_advance(engine, st, dt, Om):
     # one substep count for all bodies (|ω| h <= 0.02 for the fastest spinner; spec A3)
     nsub = jnp.clip(jnp.ceil(jnp.max(Om) * dt / 0.02), 1, engine.n_rot).astype(jnp.int32)
     h = dt / nsub.astype(jnp.float64)
-    q, Pi = jax.lax.fori_loop(0, nsub, lambda _, qp: jax.vmap(
-        lambda q, p, i: body.rotate_free(q, p, i, h, 1))(qp[0], qp[1], st.Ip), (st.q, st.Pi))
+    # only live aggregates and spinning spheres move in orientation (a free sphere with Π = 0 keeps q = 1
+    # exactly), so the work follows them, in chunks of at most 512 bodies
+    n = st.alive.shape[0]
+    spin = st.alive & ((st.nmem > 1) | jnp.any(st.Pi != 0, axis=-1))
+    ids = jnp.nonzero(spin, size=n, fill_value=n)[0]
+    m = jnp.sum(spin).astype(jnp.int32)
+    B = min(n, 512)
+    lane = jnp.arange(B)
+
+    def chunk(c, qp):
+        p = c * B + lane
+        ok = p < m
+        sl = jnp.where(ok, ids[jnp.minimum(p, n - 1)], 0)
+        qb, pb = jax.lax.fori_loop(0, nsub, lambda _, z: jax.vmap(
+            lambda q, p, i: body.rotate_free(q, p, i, h, 1))(z[0], z[1], st.Ip[sl]), (qp[0][sl], qp[1][sl]))
+        tgt = jnp.where(ok, sl, n)
+        return qp[0].at[tgt].set(qb, mode="drop"), qp[1].at[tgt].set(pb, mode="drop")
+
+    q, Pi = jax.lax.fori_loop(0, (m + B - 1) // B, chunk, (st.q, st.Pi))
     X = jnp.where(st.alive[:, None], _wrap(st.X + st.V * dt, st.par["L"]), st.X)
     return eqx.tree_at(lambda s: (s.X, s.q, s.Pi, s.t), st, (X, q, Pi, st.t + dt))
 
 
 def _agg_loop(engine, st, t_seg, nc_max):
     T = t_seg.shape[0]
-    n = st.alive.shape[0]
     tol = engine.tol * st.par["r0"]
     skin = st.par["skin"]
 
@@ -826,23 +936,9 @@ def _agg_loop(engine, st, t_seg, nc_max):
                           lambda s: s, st)
         dsp = _mimg(x - st.x_ref, st.par["L"])
         disp = jnp.sqrt(jnp.max(jnp.sum(dsp * dsp, axis=-1)))
-        j = st.nb
-        valid = j < n
-        jj = jnp.where(valid, j, 0)
-        ga, gb = st.sph_agg[:, None], st.sph_agg[jj]
-        valid = valid & (ga != gb)
-        d = _mimg(x[jj] - x[:, None, :], st.par["L"])
-        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
-        g = dist - (st.sph_R[:, None] + st.sph_R[jj])
-        gdot = jnp.sum(d * (u[jj] - u[:, None, :]), axis=-1) / jnp.where(dist > 0, dist, 1.0)
         Om = jax.vmap(body.max_spin)(st.Pi, st.Ip)
         acc = Om * Om * st.Rmax
-        A = 2.0 * (acc[ga] + acc[gb])
-        ev = valid & (g <= tol) & (gdot < 0)
-        flat = jnp.argmin(jnp.where(ev, gdot, jnp.inf).reshape(-1))
-        s_ev, t_ev = (flat // j.shape[1]).astype(jnp.int32), jj.reshape(-1)[flat].astype(jnp.int32)
-        any_ev = jnp.any(ev)
-        tstar = jnp.min(jnp.where(valid, body.safe_time(g, gdot, A), jnp.inf))
+        tstar, any_ev, s_ev, t_ev = _pair_scan(st, x, u, acc, tol)
         spd = jnp.where(st.alive, jnp.sqrt(jnp.sum(st.V * st.V, axis=-1)) + Om * st.Rmax, 0.0)
         vmax = jnp.max(spd)
         dt_skin = jnp.where(vmax > 0, (0.5 * skin - disp) / jnp.where(vmax > 0, vmax, 1.0), jnp.inf)
@@ -921,6 +1017,15 @@ class BoxResult(AbstractResult):
     @property
     def m0(self):
         return self.final_state.par["m0"]
+
+    @property
+    def status_message(self):
+        """Text of the final status: for ``capacity_exceeded`` which capacity overflowed and which
+        :class:`RigidBox` argument to raise (:func:`capacity_message`), else the :class:`jaxcoag.RESULTS` text."""
+        code = int(np.asarray(self.outs["status"])[-1])
+        msg = capacity_message(np.asarray(self.outs["flags"])[-1]) if result_table()[code][0] == "capacity_exceeded" \
+            else ""
+        return msg or result_table()[code][1]
 
     @property
     def max_mass(self):
@@ -1037,6 +1142,7 @@ class BoxResult(AbstractResult):
                             code=int(np.asarray(result_code(self.status))), extra=extra, attrs=attrs,
                             extra_coords={"k": ("k", np.arange(1, n0 + 1)), "axis": ("axis", ["x", "y", "z"])})
         ds.attrs["model"] = self.model
+        ds["status"].attrs["status_message"] = self.status_message
         return ds
 
 
@@ -1051,12 +1157,17 @@ def run(box, t_out, *, engine=None, checkpoint=None, every=1, resume=True, progr
         checkpoint, every, resume, progress, max_segments, throw: as for :func:`jaxcoag.evolve`.
 
     Returns:
-        :class:`BoxResult`.
+        :class:`BoxResult` (a ``capacity_exceeded`` status also warns, with the capacity to raise:
+        :attr:`BoxResult.status_message`).
 
     References: Richardson (1995) §3.
     """
     engine = RigidBox() if engine is None else engine
     if not isinstance(engine, RigidBox):
         raise JaxcoagInputError(f"engine must be a rigid.RigidBox(...); got {type(engine).__name__}.")
-    return evolve(None, engine, box, t_out, checkpoint=checkpoint, every=every, resume=resume, progress=progress,
-                  max_segments=max_segments, throw=throw)
+    res = evolve(None, engine, box, t_out, checkpoint=checkpoint, every=every, resume=resume, progress=progress,
+                 max_segments=max_segments, throw=throw)
+    flags = np.asarray(res.outs["flags"])
+    if flags.ndim == 1 and flags.size and int(flags[-1]) & 3:
+        warnings.warn(capacity_message(flags[-1]), RuntimeWarning, stacklevel=2)
+    return res

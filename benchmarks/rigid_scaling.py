@@ -1,0 +1,122 @@
+"""Cost of the rigid-aggregate box (``jaxcoag.aggregates.rigid``, Richardson 1995 model v) against the number of
+spheres N at fixed number density.
+
+Model (v) settings (R95 Table I: spheres of radius 0.033, aggregates stick below the impact-energy threshold and
+bounce with the Bridges et al. 1984 law above it; Maxwellian rms speed v0 = 13) in a box of side
+L = 10 (N / 9000)^(1/3), so that the number density (9 per unit volume) and the collision rate per sphere are
+those of model (v) for every N. Each size is run once to t_a = 0.01 (the first call: compile plus a short run,
+reported as ``first_call_s``), then continued over a window dt = max(0.01, 200 / N) (about 200 collisions, and
+at least five neighbour-list rebuilds) with the compiled program; that second call is timed. Reported per size:
+wall time per unit simulated time, per loop step and per collision, the step / collision / rebuild counts of
+the window. The exponent b of ``wall per unit time ~ N^b`` is the least-squares slope of the logs with its
+standard error (scipy.stats.linregress). Writes benchmarks/results/rigid_scaling[_quick].json and prints a
+table; the machine record (with the load average) goes into the JSON.
+
+    python benchmarks/rigid_scaling.py [--quick] [--sizes 1000,3000,10000,30000] [--out PATH]
+"""
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import stats  # noqa: E402
+
+from benchmarks import _common  # noqa: E402
+from jaxcoag.aggregates import rigid  # noqa: E402
+
+V0, T_A = 13.0, 0.01
+
+
+def window(n0):
+    """Simulated time of the timed window for N spheres (about 200 collisions, at least 0.01)."""
+    return max(0.01, 200.0 / n0)
+
+
+def timed(n0, seed=1):
+    """Compile + short run to T_A, then the timed continuation over window(n0) (module docstring)."""
+    L = 10.0 * (n0 / 9000.0) ** (1.0 / 3.0)
+    box = rigid.box_model("v", n0=n0, box=L, v0=V0, key=jax.random.key(seed))
+    t0 = time.perf_counter()
+    r1 = rigid.run(box, jnp.array([T_A]))
+    jax.block_until_ready(r1.outs)
+    first = time.perf_counter() - t0
+    dt = window(n0)
+    t0 = time.perf_counter()
+    r2 = rigid.run(r1, jnp.array([T_A + dt]))
+    jax.block_until_ready(r2.outs)
+    wall = time.perf_counter() - t0
+    d = {k: int(np.asarray(r2.outs[k])[-1]) - int(np.asarray(r1.outs[k])[-1])
+         for k in ("n_steps", "n_c", "n_build")}
+    return dict(n0=n0, L=L, t_a=T_A, window=dt, first_call_s=first, wall_s=wall, steps=d["n_steps"],
+                collisions=d["n_c"], rebuilds=d["n_build"], wall_per_time=wall / dt,
+                wall_per_step_ms=1e3 * wall / max(d["n_steps"], 1), wall_per_collision_ms=1e3 * wall / max(d["n_c"], 1),
+                steps_per_time=d["n_steps"] / dt, n_aggregates_end=int(np.asarray(r2.outs["n_aggregates"])[-1]),
+                status=r2.status_message or "successful")
+
+
+def fit(rows, key="wall_per_time"):
+    """Exponent of ``key ~ N^b``: (b, standard error) by least squares on the logs."""
+    if len(rows) < 3:
+        if len(rows) == 2:
+            a, b = rows
+            return math.log(b[key] / a[key]) / math.log(b["n0"] / a["n0"]), math.nan
+        return math.nan, math.nan
+    lr = stats.linregress(np.log([r["n0"] for r in rows]), np.log([r[key] for r in rows]))
+    return float(lr.slope), float(lr.stderr)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="N = 1000, 3000 only")
+    ap.add_argument("--sizes", default=None, help="comma-separated N (default 1000,3000,10000,30000)")
+    ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/rigid_scaling[_quick].json)")
+    args = ap.parse_args(argv)
+    if args.sizes:
+        try:
+            sizes = [int(s) for s in args.sizes.split(",")]
+        except ValueError:
+            raise SystemExit(f"--sizes must be comma-separated integers >= 8; got {args.sizes!r}") from None
+        if any(s < 8 for s in sizes):
+            raise SystemExit(f"--sizes must be comma-separated integers >= 8; got {args.sizes!r}")
+    else:
+        sizes = [1000, 3000] if args.quick else [1000, 3000, 10000, 30000]
+    path = args.out or os.path.join(_common.RESULTS, "rigid_scaling" + ("_quick" if args.quick else "") + ".json")
+    machine_start = _common.machine_info()
+    rows = []
+    print(f"{'N':>7} {'window':>7} {'steps':>7} {'coll.':>6} {'rebuilds':>8} {'wall [s]':>9} {'s / unit t':>10} "
+          f"{'ms/step':>8} {'ms/coll.':>9} {'first call [s]':>14} status")
+    for n0 in sizes:
+        r = timed(n0)
+        rows.append(r)
+        print(f"{n0:7d} {r['window']:7.3f} {r['steps']:7d} {r['collisions']:6d} {r['rebuilds']:8d} {r['wall_s']:9.2f} "
+              f"{r['wall_per_time']:10.1f} {r['wall_per_step_ms']:8.3f} {r['wall_per_collision_ms']:9.2f} "
+              f"{r['first_call_s']:14.1f} {r['status']}", flush=True)
+    b, be = fit(rows)
+    bs, bse = fit(rows, "wall_per_step_ms")
+    bn, bne = fit(rows, "steps_per_time")
+    print(f"wall per unit simulated time ~ N^{b:.2f} +- {be:.2f}  (= steps per unit time ~ N^{bn:.2f} +- {bne:.2f}"
+          f" times wall per step ~ N^{bs:.2f} +- {bse:.2f})")
+    res = dict(benchmark="rigid_scaling", quick=args.quick, model="v", v0=V0, number_density=9000 / 1000.0,
+               rows=rows, exponent_wall_per_time=[b, be], exponent_wall_per_step=[bs, bse],
+               exponent_steps_per_time=[bn, bne], machine_start=machine_start, machine_end=_common.machine_info(),
+               note=("wall_s excludes compilation (the first call compiles); "
+                     "load_average in machine_* is the 1/5/15-min load of the 2-core machine shared with other jobs"))
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path + ".tmp", "w") as fh:
+        json.dump(res, fh, indent=1, default=str)
+    os.replace(path + ".tmp", path)
+    print(f"wrote {path}")
+    return res
+
+
+if __name__ == "__main__":
+    main()
