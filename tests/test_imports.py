@@ -94,8 +94,15 @@ _STDLIB = set(sys.stdlib_module_names)
 _OWN = {"jaxcoag", "benchmarks", "_common", "_scripts", "_testkernels", "conftest"}
 
 
+def _private_helpers():
+    """Helper modules of the scripts and tests (``_name.py`` in paper_figs/, benchmarks/, examples/, tests/), which
+    scripts put on sys.path themselves (e.g. paper_figs/_rigid_models.py, imported by benchmarks/rigid_models.py)."""
+    return {p.stem for d in ("paper_figs", "benchmarks", "examples", "tests") if (ROOT / d).is_dir()
+            for p in (ROOT / d).rglob("_*.py") if p.stem != "__init__"}
+
+
 def _third_party(paths):
-    own_scripts = {p.stem for p in paths}
+    own_scripts = {p.stem for p in paths} | _private_helpers()
     found = {}
     for p in paths:
         for m in _top_level_imports(p):
