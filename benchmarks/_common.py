@@ -264,14 +264,17 @@ def _jsonable(obj):
 
 
 def write_json(path, payload):
-    """Write ``payload`` (dict) as indented JSON to ``path``.
+    """Write ``payload`` (dict) as indented JSON to ``path``, atomically (a temporary file in the same folder,
+    then ``os.replace``: an interrupted run never leaves a truncated file).
 
-    Floats are stored with 9 significant digits; non-finite floats become null.
+    Floats are stored with 9 significant digits; non-finite floats become null; other objects as ``str``.
     """
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as fh:
-        json.dump(_jsonable(payload), fh, indent=1)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as fh:
+        json.dump(_jsonable(payload), fh, indent=1, default=str)
+    os.replace(tmp, path)
     return path
 
 

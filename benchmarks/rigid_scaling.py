@@ -16,7 +16,6 @@ table; the machine record (with the load average) goes into the JSON.
 """
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -110,10 +109,7 @@ def main(argv=None):
                exponent_steps_per_time=[bn, bne], machine_start=machine_start, machine_end=_common.machine_info(),
                note=("wall_s excludes compilation (the first call compiles); "
                      "load_average in machine_* is the 1/5/15-min load of the 2-core machine shared with other jobs"))
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    with open(path + ".tmp", "w") as fh:
-        json.dump(res, fh, indent=1, default=str)
-    os.replace(path + ".tmp", path)
+    _common.write_json(path, res)
     print(f"wrote {path}")
     return res
 
