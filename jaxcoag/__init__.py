@@ -18,11 +18,13 @@ Public API (flat; the modules behind it are private or namespaces):
     analytic, diagnostics        exact solutions; moments, L1 errors, mass peak, m^2 f(m)
     io, sweep, fit, checkpoint   netCDF output, vmapped sweeps, gradient fits, checkpoint/resume
     binned, mc                   engine namespaces (schemes, solvers, initial species, stop predicates)
+    enable_compilation_cache     JAX's persistent compilation cache (a second process does not compile again)
 
 Enable float64 before use: ``jax.config.update("jax_enable_x64", True)``.
 """
 
 from . import analytic, binned, checkpoint, constants, diagnostics, effects, io, kernels, mc, outcomes, physics, scenes
+from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._engine import AbstractEngine as AbstractEngine
 from ._engine import AbstractResult as AbstractResult
 from ._engine import Monodisperse as Monodisperse

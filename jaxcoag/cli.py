@@ -17,6 +17,12 @@
                                            template: ``jaxcoag config --engine mc | jaxcoag run -``).
 ``jaxcoag demo``                           relative velocities and kernel of the ch. 4 nebula scene.
 
+``jaxcoag run`` and ``jaxcoag sweep`` keep JAX's persistent compilation cache
+(:func:`jaxcoag.enable_compilation_cache`) in ``$JAXCOAG_CACHE_DIR`` (default ``~/.cache/jaxcoag/jax``),
+so a second run of the same configuration loads its compiled solve instead of compiling it again;
+``--no-cache`` or ``JAXCOAG_CACHE_DIR=off`` switch it off (an unwritable directory gives a warning and
+the run goes on uncached).
+
 ``jaxcoag`` with no subcommand runs ``jaxcoag run``. Exit codes: 0 success, 1 the run failed (a
 failure status of :data:`jaxcoag.FAILURES`, e.g. the solver's step budget or the Monte Carlo event
 budget; the outputs up to the failure are saved) or stopped early (``--max-segments``), 2 refused
@@ -64,6 +70,19 @@ def _version() -> str:
         return __version__
 
 
+_NO_CACHE_HELP = ("do not use JAX's persistent compilation cache (default: on, in $JAXCOAG_CACHE_DIR or "
+                  "~/.cache/jaxcoag/jax, so a second run loads the compiled solve instead of compiling it; "
+                  "JAXCOAG_CACHE_DIR=off also switches it off)")
+
+
+def _cache(args):
+    """Switch on the persistent compilation cache unless --no-cache (jaxcoag.enable_compilation_cache)."""
+    if not getattr(args, "no_cache", False):
+        from ._cache import enable_compilation_cache
+
+        enable_compilation_cache()
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .config import ENGINES
 
@@ -92,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-figure", action="store_true", help="do not save the figure panel")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("--quick", action="store_true", help="coarse grid, few outputs (seconds; smoke test)")
+    r.add_argument("--no-cache", action="store_true", help=_NO_CACHE_HELP)
 
     pl = sub.add_parser("plot", help="re-plot a saved run (netCDF) as the standard panel")
     pl.add_argument("file", help="netCDF file written by `jaxcoag run`")
@@ -111,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true", help="no progress bar (the bar counts finished members)")
     s.add_argument("--no-figure", action="store_true", help="do not save the figure of the swept quantity "
                    "(default: next to --out, e.g. sweep.png: final mass peak vs the parameters)")
+    s.add_argument("--no-cache", action="store_true", help=_NO_CACHE_HELP)
 
     c = sub.add_parser("config", help="print the default run configuration (TOML with comments)")
     c.add_argument("--engine", choices=list(ENGINES), default="binned", help="the default run of this engine "
@@ -154,6 +175,7 @@ def _cmd_run(args) -> int:
     from . import runner
 
     cfg = _load_cfg(args.config, args.set, args.engine)
+    _cache(args)
     if args.max_segments is not None and args.max_segments < 1:
         raise runner.JaxcoagInputError("--max-segments must be >= 1.")
     ck = False if args.no_checkpoint else args.checkpoint
@@ -192,6 +214,7 @@ def _cmd_sweep(args) -> int:
     from . import runner
 
     cfg = _load_cfg(args.config, args.set)
+    _cache(args)
     params = {}
     for item in args.param:
         if "=" not in item:

@@ -34,7 +34,8 @@ from . import diagnostics
 from ._validate import JaxcoagInputError
 
 __all__ = ["run", "RunResult", "quick_config", "kernel_from_dataset", "summary_rows", "format_summary",
-           "sweep_config", "figure_path", "checkpoint_path", "st_frag", "frag_limited_size", "check_writable"]
+           "sweep_config", "figure_path", "checkpoint_path", "st_frag", "frag_limited_size", "check_writable",
+           "CompileClock"]
 
 
 class RunResult:
@@ -44,7 +45,11 @@ class RunResult:
     :class:`jaxcoag.MCResult`), dataset (its common-layout ``xarray.Dataset`` on the [grid] bins,
     as written), built (config.Built), path (netCDF or None), figure (PNG path or None),
     checkpoint (path or None), finished (all output times done), failed (a failure status),
-    resumed_from (outputs already in the checkpoint when the run started), wall_s [s], rows (list
+    resumed_from (outputs already in the checkpoint when the run started), wall_s [s], timings (dict
+    [s]: setup_s = validation and build, solve_s = the evolve call incl. compilation, of which
+    compile_s = XLA compile or persistent-cache load and trace_lower_s = tracing and lowering
+    (:class:`CompileClock`), output_s = dataset, netCDF, figure and summary, wall_s; binned and
+    Monte Carlo runs), rows (list
     of per-output dicts, see :func:`summary_rows`), numbers (dict of headline numbers: final mass
     peak [g], peak radius [cm], St at the peak, max St, |mass drift|, status name, fragmentation-
     barrier estimate St_frag, and the engine's work: solver steps / Monte Carlo events).
@@ -189,7 +194,8 @@ def format_summary(res) -> str:
     cfg = b.cfg
     n = res.numbers
     if cfg.engine == "binned":
-        eng = f"binned {cfg['solver']['scheme']} scheme on {b.grid.nbins} bins"
+        solver = getattr(res.result, "solver", "") or b.engine.solver_name(b.outcome)
+        eng = f"binned {cfg['solver']['scheme']} scheme on {b.grid.nbins} bins, solver {solver}"
         work = f"{n['steps']} accepted steps ({n['rejected']} rejected)"
     else:
         s = cfg["mc"]
@@ -215,6 +221,11 @@ def format_summary(res) -> str:
                      f"{r['st_max']:9.3g} {r['mass_drift']:11.2e}")
     lines.append(f"result: {n['result']}; {work}; {n['outputs_done']} of {len(b.t_out)} outputs; wall "
                  f"{res.wall_s:.1f} s" + (f" (resumed after output {res.resumed_from})" if res.resumed_from else ""))
+    tm = getattr(res, "timings", None)
+    if tm:
+        lines.append(f"time: set-up {tm['setup_s']:.1f} s, solve {tm['solve_s']:.1f} s (XLA compile or cache load "
+                     f"{tm['compile_s']:.1f} s, trace + lower {tm['trace_lower_s']:.1f} s), output "
+                     f"{tm['output_s']:.1f} s")
     if not res.finished and not res.failed:
         lines.append(f"stopped after {n['outputs_done']} of {len(b.t_out)} outputs; continue with --resume")
     for label, p in (("netCDF", res.path), ("figure", res.figure), ("checkpoint", res.checkpoint)):
@@ -354,9 +365,12 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
                              max_segments=max_segments, verbose=verbose, save=save, t_start=t_start)
     built = cfgmod.build(cfg)
     n_seg = len(built.t_out)
-    result, resumed_from = evolve_saved(built.kernel, built.engine, built.initial, built.t_out, outcome=built.outcome,
-                                        key=built.key, checkpoint=checkpoint, every=1, resume=resume,
-                                        progress=progress, max_segments=max_segments, save=save)
+    t_built = time.perf_counter()
+    with CompileClock() as clock:
+        result, resumed_from = evolve_saved(built.kernel, built.engine, built.initial, built.t_out,
+                                            outcome=built.outcome, key=built.key, checkpoint=checkpoint, every=1,
+                                            resume=resume, progress=progress, max_segments=max_segments, save=save)
+    t_solved = time.perf_counter()
     if not save:
         checkpoint = None  # nothing was written
     rname = RESULT_NAMES[int(np.asarray(result_code(result.status)))]
@@ -389,12 +403,49 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
                      else f"alpha = {float(built.gas.alpha):.2g}, R = {float(built.gas.R) / C.AU:.3g} AU")
             panel(ds, built.kernel, path=fig, title=f"{cfg['run']['name']} ({built.engine.name}): {built.scene.name}, "
                   f"{where}", frag_limit=(m_fr, a_fr, sf) if np.isfinite(m_fr) else None)
+    t_end = time.perf_counter()
+    timings = dict(setup_s=t_built - t_start, solve_s=t_solved - t_built, compile_s=clock.compile_s,
+                   trace_lower_s=clock.trace_lower_s, output_s=t_end - t_solved, wall_s=t_end - t_start)
     res = RunResult(result=result, dataset=ds, built=built, path=path, figure=fig, checkpoint=checkpoint,
                     finished=finished, failed=failed, resumed_from=resumed_from, rows=rows, numbers=numbers,
-                    wall_s=time.perf_counter() - t_start)
+                    wall_s=t_end - t_start, timings=timings)
     if verbose:
         print(format_summary(res))
     return res
+
+
+class CompileClock:
+    """Context manager summing JAX's compile-time events while it is open (``jax.monitoring``
+    duration listeners): ``compile_s`` = XLA backend compilation, or loading the executable from the
+    persistent compilation cache ("/jax/core/compile/backend_compile_duration"), ``trace_lower_s`` =
+    tracing to a jaxpr and lowering to MLIR ("/jax/core/compile/jaxpr_trace_duration",
+    ".../jaxpr_to_mlir_module_duration"; nested jits may count twice) [s]. Both are part of the wall
+    time of the code inside the block."""
+
+    BACKEND = "/jax/core/compile/backend_compile_duration"
+    TRACE = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration")
+
+    def __init__(self):
+        self.compile_s = 0.0
+        self.trace_lower_s = 0.0
+
+    def _listen(self, event, duration, **kw):
+        if event == self.BACKEND:
+            self.compile_s += float(duration)
+        elif event in self.TRACE:
+            self.trace_lower_s += float(duration)
+
+    def __enter__(self):
+        import jax.monitoring
+
+        jax.monitoring.register_event_duration_secs_listener(self._listen)
+        return self
+
+    def __exit__(self, *exc):
+        import jax.monitoring
+
+        jax.monitoring.unregister_event_duration_listener(self._listen)
+        return False
 
 
 def evolve_saved(kernel, engine, initial, t_out, *, outcome=None, key=None, checkpoint, every, resume, progress,

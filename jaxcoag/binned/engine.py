@@ -54,12 +54,17 @@ class Binned(AbstractEngine):
             2008 two-bin split, exact mass conservation) or ``DGScheme(order=k)`` (Lombart & Laibe 2021).
         solver: a diffrax solver, or None: ``diffrax.Tsit5()`` for pure coagulation and
             ``diffrax.Kvaerno5`` with an optimistix Newton root finder with fragmentation (stiff);
-            ``jaxcoag.binned.LinearlyImplicitEuler`` is the DustPy-parity alternative.
+            ``jaxcoag.binned.LinearlyImplicitEuler`` is the DustPy-parity alternative. The result
+            states the one used (``BinnedResult.solver``, :meth:`solver_name`).
         stepsize_controller: diffrax controller; default ``PIDController(rtol, atol * M_tot / w)``
             (absolute tolerance relative to the total mass, per bin).
         rtol, atol: relative tolerance, and absolute tolerance relative to the total mass.
         dt0: initial step [s]; default 1e-3 of the initial collision time (always explicit: dt0=None
-            in diffrax gave NaN gradients).
+            in diffrax gave NaN gradients). Only the first solve of a run starts from it: with an
+            adaptive controller the step size reached is carried on (engine state ``"dt"``, stored
+            in checkpoints, and ``BinnedResult.dt`` for continuing a result), so checkpoint
+            segments and continuations do not climb back from a tiny step
+            (:class:`jaxcoag.binned.solve.CarriedStepController`).
         adjoint: diffrax adjoint; default ``RecursiveCheckpointAdjoint`` (reverse mode); use
             ``diffrax.ForwardMode()`` for ``jax.jvp``/``jacfwd``.
         max_steps: solver step budget per advance (static).
@@ -146,11 +151,21 @@ class Binned(AbstractEngine):
                                         "positive number density.")
 
     def _init(self, kernel, initial, t0, outcome, key):
+        # "dt" [s]: the step size to continue with (0 = none yet: the first solve starts from dt0)
         if isinstance(initial, BinnedResult):
             return {"y": jnp.asarray(initial.y[-1]), "t": jnp.asarray(initial.t[-1], jnp.float64),
-                    "M0": jnp.asarray(initial.M0, jnp.float64)}
+                    "M0": jnp.asarray(initial.M0, jnp.float64), "dt": jnp.asarray(initial.dt, jnp.float64)}
         y0 = jnp.asarray(self.scheme.init(self.grid, self._n0(initial)), jnp.float64)
-        return {"y": y0, "t": jnp.asarray(t0, jnp.float64), "M0": self.scheme.total_mass(y0, self.grid)}
+        return {"y": y0, "t": jnp.asarray(t0, jnp.float64), "M0": self.scheme.total_mass(y0, self.grid),
+                "dt": jnp.zeros((), jnp.float64)}
+
+    def solver_name(self, outcome=None) -> str:
+        """Name of the time integrator this engine uses with ``outcome``: "Tsit5" (pure coagulation)
+        or "Kvaerno5+Newton" (with fragmentation) for the automatic choice, else the class name of
+        the given diffrax solver (e.g. "LinearlyImplicitEuler")."""
+        if self.solver is None:
+            return "Tsit5" if _fragmentation(outcome) is None else "Kvaerno5+Newton"
+        return type(self.solver).__name__
 
     def _advance(self, kernel, state, t_seg, outcome):
         solver = self.solver
@@ -161,17 +176,17 @@ class Binned(AbstractEngine):
         meter = diffrax.NoProgressMeter() if self.progress_meter is None else self.progress_meter
         t_seg = jnp.asarray(t_seg, jnp.float64)
         dt0 = None if self.dt0 is None else jnp.asarray(self.dt0, jnp.float64)
-        ys, res, stats = _solve_impl(
+        ys, res, stats, dt_next = _solve_impl(
             # tolerances travel as arrays: changing them does not recompile
             self.scheme, self.grid, kernel, frag, state["y"], state["t"], t_seg, solver, self.stepsize_controller,
             jnp.asarray(self.rtol, jnp.float64), jnp.asarray(self.atol, jnp.float64), dt0, adjoint,
-            int(self.max_steps), meter, state["M0"])
+            int(self.max_steps), meter, state["M0"], state.get("dt"))
         n = t_seg.shape[0]
         code = jnp.broadcast_to(result_code(res), (n,))
         last = jnp.arange(n) == n - 1
         outs = {"y": ys, "status": code,
                 "steps": jnp.where(last, stats["steps"], 0), "rejected": jnp.where(last, stats["rejected"], 0)}
-        return {"y": ys[-1], "t": t_seg[-1], "M0": state["M0"]}, outs
+        return {"y": ys[-1], "t": t_seg[-1], "M0": state["M0"], "dt": dt_next}, outs
 
     def _result(self, kernel, t, outs, state, outcome):
         sch, grid = self.scheme, self.grid
@@ -185,7 +200,8 @@ class Binned(AbstractEngine):
         stats = {"steps": jnp.sum(outs["steps"]), "rejected": jnp.sum(outs["rejected"]),
                  "num_steps": jnp.sum(outs["steps"]) + jnp.sum(outs["rejected"])}
         return BinnedResult(t=jnp.asarray(t, jnp.float64), y=Y, rho=rho, n=num, gel_mass=gel, mass_drift=drift,
-                            status=status, stats=stats, M0=M0, grid=grid)
+                            status=status, stats=stats, M0=M0, grid=grid, dt=jnp.asarray(state["dt"], jnp.float64),
+                            solver=self.solver_name(outcome))
 
 
 class BinnedResult(AbstractResult):
@@ -202,6 +218,11 @@ class BinnedResult(AbstractResult):
         stats: {"steps", "rejected", "num_steps"} solver step counts.
         M0: total mass density at the run's start [g cm^-3].
         grid: the MassGrid (static).
+        dt: step size [s] the solve would continue with after ``t[-1]`` (passing the result as
+            ``initial`` continues from it instead of restarting from a tiny ``dt0``).
+        solver: name of the time integrator used (static str): "Tsit5" (automatic, pure
+            coagulation), "Kvaerno5+Newton" (automatic, with fragmentation) or the class name of
+            the diffrax solver given to ``Binned(solver=...)``.
     """
 
     t: jax.Array
@@ -214,6 +235,8 @@ class BinnedResult(AbstractResult):
     stats: dict
     M0: jax.Array
     grid: MassGrid = eqx.field(static=True)
+    dt: jax.Array = 0.0
+    solver: str = eqx.field(static=True, default="")
 
     @property
     def centers(self):
@@ -222,8 +245,8 @@ class BinnedResult(AbstractResult):
 
     @property
     def final_state(self):
-        """Engine state at ``t[-1]`` ({"y", "t", "M0"}); pass the result as ``initial`` to continue."""
-        return {"y": self.y[..., -1, :], "t": self.t[..., -1], "M0": self.M0}
+        """Engine state at ``t[-1]`` ({"y", "t", "M0", "dt"}); pass the result as ``initial`` to continue."""
+        return {"y": self.y[..., -1, :], "t": self.t[..., -1], "M0": self.M0, "dt": self.dt}
 
     def bin_edges(self, edges=None):
         """Mass-bin edges [g]: the engine's grid for ``edges=None``, else ``edges`` (checked)."""
@@ -271,7 +294,8 @@ class BinnedResult(AbstractResult):
             ``m_edge`` [g] (and ``a``, ``St``); variables ``mass_per_bin`` [g cm^-3] and ``number_per_bin``
             [cm^-3] on (t, m), ``gel_mass`` [g cm^-3] and ``mass_drift`` [1] on t, ``status`` (RESULTS
             code, attributes ``status_name``/``status_message``), ``steps``, ``rejected_steps``;
-            attributes ``title``, ``Conventions``, ``engine`` = "binned", ``status``.
+            attributes ``title``, ``Conventions``, ``engine`` = "binned", ``status``, ``solver`` (the time
+            integrator used, :attr:`solver`).
 
         References: CF conventions 1.10 (units, long_name).
         """
@@ -291,8 +315,11 @@ class BinnedResult(AbstractResult):
             "rejected_steps": ((), np.int64(np.asarray(self.stats["rejected"])),
                                {"units": "1", "long_name": "rejected solver steps"}),
         }
-        return common_dataset(engine="binned", title="jaxcoag binned coagulation solution", t=np.asarray(self.t),
-                              edges=e, mass_per_bin=rho, number_per_bin=np.asarray(self.number_per_bin(edges)),
-                              gel_mass=gel, mass_drift=np.asarray(self.mass_drift), code=int(np.asarray(result_code(self.status))),
-                              extra=extra, extra_coords={}, kernel=kernel, attrs=attrs,
-                              centres=np.asarray(self.grid.centers, np.float64) if edges is None else None)
+        ds = common_dataset(engine="binned", title="jaxcoag binned coagulation solution", t=np.asarray(self.t),
+                            edges=e, mass_per_bin=rho, number_per_bin=np.asarray(self.number_per_bin(edges)),
+                            gel_mass=gel, mass_drift=np.asarray(self.mass_drift), code=int(np.asarray(result_code(self.status))),
+                            extra=extra, extra_coords={}, kernel=kernel, attrs=attrs,
+                            centres=np.asarray(self.grid.centers, np.float64) if edges is None else None)
+        if self.solver:
+            ds.attrs["solver"] = self.solver
+        return ds

@@ -36,7 +36,7 @@ from .grid import MassGrid
 from .scheme import AbstractScheme, check_memory
 from .twobin import TwoBinScheme
 
-__all__ = ["steady_state", "SteadyState"]
+__all__ = ["steady_state", "SteadyState", "CarriedStepController"]
 
 
 def _is_implicit(solver, fragmentation):
@@ -97,11 +97,77 @@ def _default_dt0(scheme, grid, data, y0, t0, t1):
     return jax.lax.stop_gradient(jnp.minimum(1e-3 * tc, 1e-2 * span))
 
 
+class CarriedStepController(diffrax.AbstractAdaptiveStepSizeController):
+    """An adaptive step-size controller that starts from a given step and reports the step to
+    continue with, so that consecutive solves (checkpoint segments, continued results) go on
+    with the step size reached instead of restarting from a tiny ``dt0``.
+
+    It wraps another adaptive controller (``inner``, e.g. ``diffrax.PIDController``): every
+    decision is the inner controller's; ``init`` starts from ``dt_init`` (the ``dt0`` argument of
+    ``diffeqsolve`` is ignored and should be None), and the controller state (read with
+    ``diffrax.SaveAt(controller_state=True)``) is ``(inner state, next step, end time)``. The
+    "next step" is the inner controller's proposal after the last step, except when the last
+    accepted step was shortened to land on the end time: then it is the proposal before that
+    cut, i.e. the step an uninterrupted solve would have tried there.
+
+    Fields: inner (an ``AbstractAdaptiveStepSizeController``); dt_init (first step, in the
+    solve's time units; gradients stopped).
+
+    References: Kidger (2021) diffrax (step-size controller interface: ``init``,
+    ``adapt_step_size``, ``SaveAt(controller_state=True)``); Hairer, Norsett & Wanner (1993),
+    Solving ODEs I, II.4 (step size selection).
+    """
+
+    inner: diffrax.AbstractAdaptiveStepSizeController
+    dt_init: jax.Array
+
+    @property
+    def rtol(self):
+        return self.inner.rtol
+
+    @property
+    def atol(self):
+        return self.inner.atol
+
+    @property
+    def norm(self):
+        return self.inner.norm
+
+    def wrap(self, direction):
+        return CarriedStepController(self.inner.wrap(direction), self.dt_init)
+
+    def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
+        dt = jax.lax.stop_gradient(jnp.asarray(self.dt_init))
+        tnext, inner_state = self.inner.init(terms, t0, t1, y0, dt, args, func, error_order)
+        t_end = jnp.asarray(t1, jnp.result_type(dt))
+        return tnext, (inner_state, jnp.asarray(tnext - t0, jnp.result_type(dt)), t_end)
+
+    def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state):
+        inner_state, dt_prev, t_end = controller_state
+        keep, next_t0, next_t1, made_jump, inner_state, result = self.inner.adapt_step_size(
+            t0, t1, y0, y1_candidate, args, y_error, error_order, inner_state)
+        proposal = jax.lax.stop_gradient(next_t1 - next_t0)
+        # an accepted step that was cut short to end exactly at t_end: keep the proposal before the cut
+        cut = keep & (t1 >= t_end) & (t1 - t0 < dt_prev)
+        dt_next = jnp.where(cut, dt_prev, proposal).astype(dt_prev.dtype)
+        return keep, next_t0, next_t1, made_jump, (inner_state, dt_next, t_end), result
+
+
 @eqx.filter_jit
 def _solve_impl(scheme, grid, model, fragmentation, y0, t0, ts, solver, controller, rtol, atol, dt0,
-                adjoint, max_steps, progress_meter, M0):
+                adjoint, max_steps, progress_meter, M0, dt_carry=None):
     """Integrate from (t0, y0) and save at ts (t0 <= ts[0]); M0 [g cm^-3] is the total mass the
-    tolerances and the negative-density test refer to. Returns (ys, RESULTS item, stats)."""
+    tolerances and the negative-density test refer to. ``dt_carry`` [s]: the step to start from
+    (a positive number: the previous segment's ``dt_next``; 0, nan or None: ``dt0``, or the
+    default 1e-3 of the collision time). Returns (ys, RESULTS item, stats, dt_next [s]: the step
+    to continue with).
+
+    With an adaptive controller (the default ``PIDController``, or one given) the solve runs under
+    :class:`CarriedStepController` with ``diffeqsolve(dt0=None)``, and a segment with one output time
+    saves with ``SaveAt(t1=True)``: then none of ``diffeqsolve``'s runtime input checks (dt0 sign,
+    save times ordered and inside [t0, t1]; equinox ``error_if``) is compiled in. Those checks are
+    host callbacks, and a program with host callbacks is never written to JAX's persistent
+    compilation cache; jaxcoag checks the same inputs before the solve (``evolve``)."""
     data = scheme.precompute(model, grid, fragmentation)
     term = diffrax.ODETerm(lambda t, y, args: scheme.rhs(t, y, args))
     t1 = ts[-1]
@@ -116,10 +182,24 @@ def _solve_impl(scheme, grid, model, fragmentation, y0, t0, ts, solver, controll
         controller = diffrax.PIDController(rtol=rtol, atol=atol_vec)
     if dt0 is None:
         dt0 = _default_dt0(scheme, grid, data, y0, t0, t1)
-    sol = diffrax.diffeqsolve(term, solver, t0, t1, dt0, y0, args=data,
-                              saveat=diffrax.SaveAt(ts=ts), stepsize_controller=controller,
-                              adjoint=adjoint, max_steps=max_steps, throw=False,
-                              progress_meter=progress_meter)
+    adaptive = isinstance(controller, diffrax.AbstractAdaptiveStepSizeController)
+    if adaptive:
+        if dt_carry is not None:
+            dt_carry = jax.lax.stop_gradient(jnp.asarray(dt_carry, jnp.float64))
+            dt0 = jnp.where(jnp.isfinite(dt_carry) & (dt_carry > 0), dt_carry, dt0)
+        one = ts.shape[0] == 1  # ts == [t1]
+        saveat = diffrax.SaveAt(t1=True, controller_state=True) if one else \
+            diffrax.SaveAt(ts=ts, controller_state=True)
+        sol = diffrax.diffeqsolve(term, solver, t0, t1, None, y0, args=data, saveat=saveat,
+                                  stepsize_controller=CarriedStepController(controller, dt0), adjoint=adjoint,
+                                  max_steps=max_steps, throw=False, progress_meter=progress_meter)
+        dt_next = sol.controller_state[1]
+    else:
+        sol = diffrax.diffeqsolve(term, solver, t0, t1, dt0, y0, args=data,
+                                  saveat=diffrax.SaveAt(ts=ts), stepsize_controller=controller,
+                                  adjoint=adjoint, max_steps=max_steps, throw=False,
+                                  progress_meter=progress_meter)
+        dt_next = dt0
     ys = sol.ys
     rho = jax.vmap(lambda y: scheme.mass_per_bin(y, grid))(ys)
     finite = jnp.all(jnp.isfinite(ys))
@@ -133,7 +213,7 @@ def _solve_impl(scheme, grid, model, fragmentation, y0, t0, ts, solver, controll
                                       RESULTS.nonfinite), res)
     stats = {"steps": sol.stats["num_accepted_steps"], "rejected": sol.stats["num_rejected_steps"],
              "num_steps": sol.stats["num_steps"]}
-    return ys, res, stats
+    return ys, res, stats, jax.lax.stop_gradient(jnp.asarray(dt_next, jnp.float64))
 
 
 class SteadyState(eqx.Module):
