@@ -134,7 +134,7 @@ def test_default_run_box_segmented_vs_one_solve():
     """The default `jaxcoag run` box (1 AU MMSN growth + fragmentation, 135 bins, Kvaerno5 + Newton,
     17 outputs to 1e4 yr) in its 17 checkpoint segments vs one solve saving every output:
     measured 211 + 3 rejected vs 196 + 3 steps (1.075x; before the carry 223 + 3, 1.14x), the
-    outputs agreeing to 1.3e-6 of the total mass (rtol 1e-6). ~4 min on 2 cores; the default test
+    outputs agreeing to 1.3e-6 of the total mass (rtol 1e-6). ~2.5 min on 2 cores; the default test
     test_segmented_run_takes_the_steps_of_one_solve covers the same code on a small box."""
     from jaxcoag import config as cfgmod
 

@@ -13,12 +13,13 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 
 import numpy as np
 import pytest
 
 import jaxcoag
-from jaxcoag import _cache
+from jaxcoag import _cache, runner
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -87,8 +88,10 @@ def test_second_process_loads_the_compiled_solve_from_the_cache(tmp_path):
     exec(_SOLVE, ns)
     try:
         assert jaxcoag.enable_compilation_cache(cache) == str(cache)
-        with _Events() as ev:
+        t0 = time.perf_counter()
+        with _Events() as ev, runner.CompileClock() as clock:
             m0, m1 = ns["solve"](jaxcoag, np)
+        wall = time.perf_counter() - t0
     finally:
         for k, v in before.items():
             jax.config.update(k, v)
@@ -97,6 +100,8 @@ def test_second_process_loads_the_compiled_solve_from_the_cache(tmp_path):
     entries = [f for f in os.listdir(cache) if not f.startswith(".")]
     assert writes >= 5 and len(entries) >= writes
     assert any(f.startswith("jit__solve_impl-") for f in entries)  # the solve itself (no host callbacks in it)
+    # the runner's compile clock saw the XLA compilations, which are part of the wall time
+    assert 0.0 < clock.compile_s < wall and 0.0 < clock.trace_lower_s < wall
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
     env.pop("JAXCOAG_CACHE_DIR", None)
     r = subprocess.run([sys.executable, "-c", _CHILD, str(cache)], capture_output=True, text=True, env=env,
