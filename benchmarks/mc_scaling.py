@@ -1,36 +1,61 @@
-"""Wall time of the Monte Carlo engine (``jaxcoag.evolve`` with ``jaxcoag.MonteCarlo``) vs Ns* and vs simulated
-time; events per second.
+"""Cost per event of the Monte Carlo engine (``jaxcoag.evolve`` with ``jaxcoag.MonteCarlo``) vs Ns* and vs
+capacity, a baseline revision run side by side, the issue-17 goal run and a vmapped seed ensemble.
 
-Sum kernel K = (m1 + m2)/2, const-V, equal-mass grouping, N = 1e30 monomers, f_eps = 1e-3.
-Each configuration is timed on its second call (the first compiles; reported separately).
-Writes benchmarks/results/mc_scaling[_quick].json and prints a table.
+Box: sum kernel K = (m1 + m2)/2, constant volume, equal-mass grouping, N = 1e30 monomers of 1 g,
+f_eps = 1e-3 (the thesis' Fig. 5.4a set-up at lower resolution). Every configuration is timed on its
+second call (the first compiles; its wall time is reported apart as ``first_call_s``).
 
-    python benchmarks/mc_scaling.py [--quick]
+Tables:
+  * ``ns``: events/s vs Ns* at the default capacity (8 Ns*), to t = 5, with the species count at 11
+    output times (max and end, and max/Ns*);
+  * ``capacity``: Ns* = 100 at capacities 150 ... 12 800: the cost per event should not follow the
+    capacity;
+  * ``goal``: Ns* = 2000 to t = 20 (issue 17: under 60 s after compile);
+  * ``ensemble``: 8 seeds, one ``jax.vmap``-ed call vs a Python loop of 8 jitted calls.
+``--baseline PATH`` runs the ``ns`` and ``capacity`` tables with the jaxcoag checkout at PATH (a
+subprocess with ``PYTHONPATH=PATH``, same machine, same invocation) and reports new/baseline ratios of
+events/s.
+
+    python benchmarks/mc_scaling.py [--quick] [--baseline /path/to/old/checkout] [--skip goal,ensemble]
+
+Writes benchmarks/results/mc_scaling[_quick].json.
 """
 
 import argparse
 import json
 import os
-import platform
+import subprocess
+import sys
+import tempfile
 import time
 
-import jax
+sys.path.append(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
-import jax.numpy as jnp
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
 
-import jaxcoag
-from jaxcoag import kernels as K
-from jaxcoag import mc
+import jaxcoag  # noqa: E402
+from jaxcoag import kernels as K  # noqa: E402
+from jaxcoag import mc  # noqa: E402
 
-OUT = os.path.join(os.path.dirname(__file__), "results")
+from benchmarks._common import machine_info, print_table, write_json  # noqa: E402
+
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 
 
-def timed(ns, tend, rates="incremental", seed=1):
-    engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=ns, f_eps=1e-3,
-                                rates={"incremental": mc.IncrementalRates(), "full": mc.FullRates()}[rates])
-    run = lambda key: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0),  # noqa: E731
-                                     jnp.array([0.0, tend]), key=key, throw=False)
+def _status(r):
+    return next(n for n in jaxcoag.RESULT_NAMES if bool(np.all(np.asarray(r.status == getattr(jaxcoag.RESULTS, n)))))
+
+
+def timed(ns, tend, capacity=None, seed=1, n_out=11):
+    """One configuration: compile call (key 0), then the timed call (key ``seed``)."""
+    engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=ns, f_eps=1e-3, capacity=capacity)
+    t_out = jnp.linspace(0.0, tend, n_out)
+    run = lambda key: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0), t_out,  # noqa: E731
+                                     key=key, throw=False)
     t0 = time.perf_counter()
     r = run(jax.random.key(0))
     jax.block_until_ready(r.m)
@@ -40,32 +65,90 @@ def timed(ns, tend, rates="incremental", seed=1):
     jax.block_until_ready(r.m)
     tw = time.perf_counter() - t0
     ev = int(r.n_events)
-    return dict(ns=ns, t=tend, rates=rates, first_call_s=tc, wall_s=tw, events=ev, ev_per_s=ev / tw,
-                status=next(n for n in jaxcoag.RESULT_NAMES if bool(r.status == getattr(jaxcoag.RESULTS, n))),
-                Ns_end=int(r.n_species[-1]))
+    nsp = np.asarray(r.n_species)
+    return dict(ns=ns, t=tend, capacity=int(r.m.shape[-1]), first_call_s=tc, wall_s=tw, events=ev, ev_per_s=ev / tw,
+                us_per_event=1e6 * tw / max(ev, 1), status=_status(r), Ns_end=int(nsp[-1]), Ns_max=int(nsp.max()),
+                Ns_max_over_target=float(nsp.max()) / ns, merges=int(r.n_merge))
+
+
+def ensemble(ns=100, tend=5.0, n_seeds=8):
+    """8 seeds: one vmapped call vs a loop of jitted single calls (both after compile)."""
+    engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=ns, f_eps=1e-3)
+    t_out = jnp.array([0.0, tend])
+    one = jax.jit(lambda key: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0), t_out, key=key,
+                                             throw=False))
+    many = jax.jit(jax.vmap(lambda key: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0), t_out,
+                                                       key=key, throw=False)))
+    keys = jax.random.split(jax.random.key(3), n_seeds)
+    jax.block_until_ready(one(keys[0]).m)
+    jax.block_until_ready(many(keys).m)
+    t0 = time.perf_counter()
+    ev_loop = 0
+    for k in keys:
+        r = one(k)
+        jax.block_until_ready(r.m)
+        ev_loop += int(r.n_events)
+    t_loop = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rv = many(keys)
+    jax.block_until_ready(rv.m)
+    t_vmap = time.perf_counter() - t0
+    ev_vmap = int(np.sum(np.asarray(rv.n_events)))
+    return dict(ns=ns, t=tend, seeds=n_seeds, loop_s=t_loop, vmap_s=t_vmap, events_loop=ev_loop, events_vmap=ev_vmap,
+                throughput_ratio_vmap_over_loop=(ev_vmap / t_vmap) / (ev_loop / t_loop))
+
+
+def tables(quick):
+    ns_grid = (50, 100) if quick else (50, 100, 200, 400, 1000, 2000)
+    caps = (150, 800) if quick else (150, 800, 3200, 12800)
+    return dict(ns=[timed(ns, 2.0 if quick else 5.0) for ns in ns_grid],
+                capacity=[timed(100, 2.0 if quick else 5.0, capacity=c) for c in caps])
+
+
+def run_baseline(path, quick):
+    """The ``ns`` and ``capacity`` tables with the checkout at ``path`` (subprocess, PYTHONPATH)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "rows.json")
+        env = dict(os.environ, PYTHONPATH=os.path.abspath(path))
+        cmd = [sys.executable, os.path.abspath(__file__), "--tables-only", out] + (["--quick"] if quick else [])
+        subprocess.run(cmd, env=env, check=True)
+        with open(out) as fh:
+            return json.load(fh)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--baseline", default=None, help="jaxcoag checkout to run side by side (PYTHONPATH)")
+    ap.add_argument("--skip", default="", help="comma list of tables to skip: goal, ensemble")
+    ap.add_argument("--tables-only", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    grid_ns = (50, 100) if args.quick else (50, 100, 200, 400)
-    grid_t = (2.0,) if args.quick else (2.0, 10.0)
-    rows = [timed(ns, 5.0) for ns in grid_ns] + [timed(100, t) for t in grid_t]
-    if not args.quick:
-        rows.append(timed(100, 5.0, rates="full"))
-    print(f"{'Ns*':>5} {'t':>5} {'rates':>12} {'events':>8} {'wall [s]':>9} {'events/s':>9} {'compile+run [s]':>16} {'Ns_end':>7} status")
-    for r in rows:
-        print(f"{r['ns']:5d} {r['t']:5.1f} {r['rates']:>12} {r['events']:8d} {r['wall_s']:9.3f} {r['ev_per_s']:9.0f} "
-              f"{r['first_call_s']:16.2f} {r['Ns_end']:7d} {r['status']}")
-    res = dict(benchmark="mc_scaling", quick=args.quick, rows=rows,
-               machine=dict(platform=platform.platform(), cores=os.cpu_count(), jax=jax.__version__,
-                            load_average=os.getloadavg()))
-    os.makedirs(OUT, exist_ok=True)
+    if args.tables_only:
+        with open(args.tables_only, "w") as fh:
+            json.dump(dict(tables(args.quick), jaxcoag_file=jaxcoag.__file__), fh, default=str)
+        return None
+    skip = set(filter(None, args.skip.split(",")))
+    base = run_baseline(args.baseline, args.quick) if args.baseline else None
+    res = dict(benchmark="mc_scaling", quick=args.quick, machine=machine_info(), **tables(args.quick))
+    cols = ["ns", "t", "capacity", "events", "wall_s", "ev_per_s", "us_per_event", "first_call_s", "Ns_max",
+            "Ns_end", "Ns_max_over_target", "merges", "status"]
+    if base is not None:
+        res["baseline"] = base
+        for name in ("ns", "capacity"):
+            for r, b in zip(res[name], base[name]):
+                r["baseline_ev_per_s"] = b["ev_per_s"]
+                r["speedup_vs_baseline"] = r["ev_per_s"] / b["ev_per_s"]
+        cols += ["baseline_ev_per_s", "speedup_vs_baseline"]
+    print_table(res["ns"], cols, "events/s vs Ns* (capacity 8 Ns*, t = 5)")
+    print_table(res["capacity"], cols, "events/s vs capacity (Ns* = 100)")
+    if not args.quick and "goal" not in skip:
+        res["goal"] = [timed(2000, 20.0)]
+        print_table(res["goal"], cols[:-2] if base is not None else cols, "goal: Ns* = 2000 to t = 20 (< 60 s)")
+    if "ensemble" not in skip:
+        res["ensemble"] = [ensemble(tend=2.0 if args.quick else 5.0)]
+        print_table(res["ensemble"], list(res["ensemble"][0]), "8-seed ensemble: vmap vs loop")
     path = os.path.join(OUT, "mc_scaling" + ("_quick" if args.quick else "") + ".json")
-    with open(path + ".tmp", "w") as fh:
-        json.dump(res, fh, indent=1, default=str)
-    os.replace(path + ".tmp", path)
+    write_json(path, res)
     print(f"wrote {path}")
     return res
 

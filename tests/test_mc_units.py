@@ -195,7 +195,8 @@ def _hand_state(m, w, z):
                  dirty=jnp.array(False), rezoom=jnp.array(False), log_mstar=jnp.array(0.0), zref=jnp.array(0.0),
                  zoom_xp=jnp.arange(3.0), zoom_fp=jnp.zeros(3), key=jax.random.key(0), k_out=jnp.array(0),
                  status=jnp.array(0), done=jnp.array(False), n_dup=jnp.array(0), n_merge=jnp.array(0),
-                 log_rho_d=jnp.array(0.0), log_mlo=jnp.array(0.0), snaps=None)
+                 log_rho_d=jnp.array(0.0), log_mlo=jnp.array(0.0), snaps=None,
+                 hi=jnp.array(n, jnp.int32), ns=jnp.array(n, jnp.int32))
     R = sys.modules["jaxcoag.mc.run"]
     cfg = R._Cfg(mode="const_v", grouping=None, capacity=S, n_snap=1, n_struct=0, n_prod=1, rates="full",
                  n_refresh=1, rounding="ceil", controller="species", d_max=1, d_up=1, n_bins=3, p_protect=0,

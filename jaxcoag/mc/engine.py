@@ -221,9 +221,11 @@ class MonteCarlo(AbstractEngine):
             ``initial_species`` (which gives its own multiplicities).
         f_eps: the largest fractional mass gain per group event (eq. 5.11); default 1e-3.
         capacity: species slots S (static). Default: grouping None: min(n_particles, 2048) + 8;
-            EqualMass: 8 ns_target; Distribution: 2 ns_target (at least 64). An equal-mass capacity
-            that cannot hold Ns* species is refused (:func:`jaxcoag.mc.min_capacity`); a run that runs
-            out of slots merges mass neighbours (status ``capacity_exceeded``, ``CapacityWarning``).
+            EqualMass: 4 ns_target (the run merges mass neighbours above 2 Ns* species, thesis ch. 6);
+            Distribution: 2 ns_target (at least 64). An equal-mass capacity that cannot hold Ns* species
+            is refused (:func:`jaxcoag.mc.min_capacity`); a run that runs out of slots merges mass
+            neighbours (status ``capacity_exceeded``, ``CapacityWarning``). The cost per event does not
+            depend on the capacity (the event passes cover the occupied slots only, in blocks).
         max_events: event budget of the whole run (continuations included); when spent the status is
             ``max_steps_reached``.
         rates: ``IncrementalRates(n_refresh=None)`` (default) or ``FullRates()``.
@@ -289,7 +291,7 @@ class MonteCarlo(AbstractEngine):
         if not isinstance(self.dedupe, (bool, np.bool_)):
             raise JaxcoagInputError(f"MonteCarlo(dedupe=...) must be True or False; got {self.dedupe!r}")
         _int_field(w, "p_protect", self.p_protect, 0, "the number of most massive species never merged")
-        _int_field(w, "capacity", self.capacity, 1, "species slots, e.g. 8 * ns_target", allow_none=True)
+        _int_field(w, "capacity", self.capacity, 1, "species slots, e.g. 4 * ns_target", allow_none=True)
         if not is_traced(self.max_events):
             me = self.max_events
             if isinstance(me, (jax.Array, np.ndarray)) and me.ndim == 0 and jnp.issubdtype(me.dtype, jnp.integer):
@@ -379,7 +381,7 @@ class MonteCarlo(AbstractEngine):
             else:
                 if is_traced(self.ns_target):
                     raise JaxcoagInputError("give MonteCarlo(capacity=...) when ns_target is traced (vmapped/jitted)")
-                cap = int(8 * float(self.ns_target)) if grouping == "equal_mass" else int(2 * float(self.ns_target))
+                cap = int(4 * float(self.ns_target)) if grouping == "equal_mass" else int(2 * float(self.ns_target))
                 cap = max(cap, 64)
         cap = int(cap)
         if cap < n_prod + 4:
@@ -397,7 +399,7 @@ class MonteCarlo(AbstractEngine):
                 raise JaxcoagInputError(
                     f"MonteCarlo(capacity={cap}) species slots cannot hold ns_target = {float(self.ns_target):g} "
                     f"equal-mass species (the run merges species above ~0.9 capacity, which would silently lower the "
-                    f"resolution); give capacity >= {s_min} (the default is 8 x ns_target) or lower ns_target")
+                    f"resolution); give capacity >= {s_min} (the default is 4 x ns_target) or lower ns_target")
         return cap
 
     # ------------------------------------------------------------------ protocol

@@ -27,7 +27,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-__all__ = ["n_eps", "log_rate_row", "log_rate_matrix", "row_sums", "log_particle_rates"]
+__all__ = ["n_eps", "log_kernel_tile", "log_rate_tile", "log_rate_row", "log_rate_matrix", "row_sums", "log_particle_rates"]
 
 LN2 = 0.6931471805599453
 
@@ -69,6 +69,79 @@ def _log_kernel(kernel, logm1, logm2, psi1, psi2):
     return kernel.log_kernel_from_log_mass(logm1, logm2, psi1, psi2)
 
 
+def _safe_log_w(w):
+    """ln w, −inf for w ≤ 0 (empty slots)."""
+    pos = w > 0
+    return jnp.where(pos, jnp.log(jnp.where(pos, w, 1.0)), -jnp.inf)
+
+
+def log_kernel_tile(kernel, logm_a, psi_a, logm_b, psi_b):
+    """ln K for every pair of the species sets A and B: shape (nA, nB) [ln(cm^3 s^-1)].
+
+    Arguments: logm_a (nA,), psi_a (nA, P), logm_b (nB,), psi_b (nB, P). The pairs are
+    evaluated as one flat batch (any elementwise kernel works, also kernels with per-pair root
+    finds).
+    """
+    nA, nB = logm_a.shape[0], logm_b.shape[0]
+    la = jnp.broadcast_to(logm_a[:, None], (nA, nB)).reshape(-1)
+    lb = jnp.broadcast_to(logm_b[None, :], (nA, nB)).reshape(-1)
+    P = psi_a.shape[-1]
+    pa = jnp.broadcast_to(psi_a[:, None, :], (nA, nB, P)).reshape(nA * nB, P)
+    pb = jnp.broadcast_to(psi_b[None, :, :], (nA, nB, P)).reshape(nA * nB, P)
+    return _log_kernel(kernel, la, lb, pa, pb).reshape(nA, nB)
+
+
+def log_rate_tile(logK, ia, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, valid_b, log2_feps, rounding="ceil",
+                  lw_a=None, lw_b=None):
+    """ln Λ' for the pairs (a, b) of A x B from their kernel values: shape (nA, nB), −inf = 0.
+
+    Arguments:
+        logK: (nA, nB) ln K(m_a, m_b) (:func:`log_kernel_tile`).
+        ia, ib: (nA,), (nB,) slot indices (ia == ib marks the diagonal, the own-species pairs).
+        logm_*, w_*, z_*, valid_*: species arrays of A (nA,) and B (nB,).
+        log2_feps, rounding: as :func:`n_eps`.
+        lw_a, lw_b: optional precomputed ln w (saves the logarithms when several tiles share them).
+
+    Per-a quantities (diagonal, ln w_a) are evaluated on (nA, 1) and per-b ones on (1, nB): the
+    only per-entry work is arithmetic on ln K (no logarithm or exponential per entry).
+
+    References: Ormel (2008) eqs. (5.7), (5.13), (5.31); see :func:`log_rate_row`.
+    """
+    dt = logK.dtype
+    za = z_a[:, None]
+    zb = z_b[None, :]
+    la = logm_a[:, None]
+    lb = logm_b[None, :]
+    ne = n_eps(za, zb, la, lb, log2_feps, rounding)
+    lwa = (_safe_log_w(w_a) if lw_a is None else lw_a)[:, None]
+    lw = (_safe_log_w(w_b) if lw_b is None else lw_b)[None, :]
+    zmin = jnp.minimum(za, zb)
+    # event fraction phi (see the module docstring and run._collide): the lower-zoom member i gives
+    # one group, the other 2^-N_eps groups (N_eps = 0 for equal zooms, so the roles do not matter
+    # there); a donor holding less (0 < w < 1 at z = 0) joins with the fraction it has, at a rate
+    # divided by that fraction (ln phi = 0 for whole groups, the rate is then unchanged bitwise)
+    ne_ln2 = ne.astype(dt) * LN2
+    a_low = za <= zb
+    lphi = jnp.minimum(0.0, jnp.minimum(jnp.where(a_low, lwa, lwa + ne_ln2), jnp.where(a_low, lw + ne_ln2, lw)))
+    lphi = jnp.where(jnp.isfinite(lphi), lphi, 0.0)
+    off = lwa + lw + (zmin + ne).astype(dt) * LN2 + logK - LN2 - lphi
+    # diagonal (per a)
+    wa = w_a[:, None]
+    lg = lwa + za.astype(dt) * LN2
+    # z >= 1: w (g - 1), with g >= 2
+    gm1_pos = lg > 1e-12
+    log_gm1 = jnp.where(gm1_pos, lg + jnp.log(-jnp.expm1(-jnp.where(gm1_pos, lg, 1.0))), -jnp.inf)
+    d_grouped = lwa + log_gm1
+    wm1 = wa - 1.0
+    # z = 0 own pair: two particles leave (Δw = 2); with 1 < w < 2 the event takes the fraction
+    # phi = w/2 (all of it) at the rate ½ w (w - 1) C / phi (= (w - 1) C), see off-diagonal above
+    lphi_aa = jnp.where(wa >= 2.0, 0.0, lwa - LN2)
+    d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2 - lphi_aa, -jnp.inf)
+    diag = jnp.where(za >= 1, d_grouped, d_single) + logK
+    out = jnp.where(ia[:, None] == ib[None, :], diag, off)
+    return jnp.where(valid_a[:, None] & valid_b[None, :], out, -jnp.inf)
+
+
 def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
     """ln of row ``a`` of the volume-free symmetric rate matrix Λ' (shape (S,), -inf = 0).
 
@@ -82,41 +155,10 @@ def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):
     References: Ormel (2008) eqs. (5.7), (5.13), (5.31); rate designs in docs/design_notes.md.
     """
     S = logm.shape[0]
-    la = jnp.broadcast_to(logm[a], (S,))
-    pa = jnp.broadcast_to(psi[a], psi.shape)
-    logK = _log_kernel(kernel, la, logm, pa, psi)
-    za = jnp.broadcast_to(z[a], (S,))
-    ne = n_eps(za, z, la, logm, log2_feps, rounding)
-    wpos = w > 0
-    lw = jnp.where(wpos, jnp.log(jnp.where(wpos, w, 1.0)), -jnp.inf)
-    lwa = lw[a]
-    zmin = jnp.minimum(za, z)
-    # event fraction phi (see the module docstring and run._collide): the lower-zoom member i gives
-    # one group, the other 2^-N_eps groups (N_eps = 0 for equal zooms, so the roles do not matter
-    # there); a donor holding less (0 < w < 1 at z = 0) joins with the fraction it has, at a rate
-    # divided by that fraction (ln phi = 0 for whole groups, the rate is then unchanged bitwise)
-    ne_ln2 = ne.astype(logm.dtype) * LN2
-    a_low = za <= z
-    lphi = jnp.minimum(0.0, jnp.minimum(jnp.where(a_low, lwa, lwa + ne_ln2), jnp.where(a_low, lw + ne_ln2, lw)))
-    lphi = jnp.where(jnp.isfinite(lphi), lphi, 0.0)
-    off = lwa + lw + (zmin + ne).astype(logm.dtype) * LN2 + logK - LN2 - lphi
-    # diagonal
-    wa, zaa = w[a], z[a]
-    lg = lwa + zaa.astype(logm.dtype) * LN2
-    # z >= 1: w (g - 1), with g >= 2
-    gm1_pos = lg > 1e-12
-    log_gm1 = jnp.where(gm1_pos, lg + jnp.log(-jnp.expm1(-jnp.where(gm1_pos, lg, 1.0))), -jnp.inf)
-    d_grouped = lwa + log_gm1
-    wm1 = wa - 1.0
-    # z = 0 own pair: two particles leave (Δw = 2); with 1 < w < 2 the event takes the fraction
-    # phi = w/2 (all of it) at the rate ½ w (w - 1) C / phi (= (w - 1) C), see off-diagonal above
-    lphi_aa = jnp.where(wa >= 2.0, 0.0, lwa - LN2)
-    d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2 - lphi_aa, -jnp.inf)
-    diag = jnp.where(zaa >= 1, d_grouped, d_single) + logK[a]
-    idx = jnp.arange(S)
-    row = jnp.where(idx == a, diag, off)
-    ok = valid & valid[a]
-    return jnp.where(ok, row, -jnp.inf)
+    a1 = jnp.reshape(jnp.asarray(a), (1,))
+    logK = log_kernel_tile(kernel, logm[a1], psi[a1], logm, psi)
+    return log_rate_tile(logK, a1, logm[a1], w[a1], z[a1], valid[a1], jnp.arange(S), logm, w, z, valid, log2_feps,
+                         rounding)[0]
 
 
 def log_rate_matrix(kernel, logm, psi, w, z, valid, log2_feps, rounding="ceil"):

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import grouping as G
-from .rates import log_particle_rates, log_rate_matrix, log_rate_row, n_eps, row_sums
+from .rates import _safe_log_w, log_kernel_tile, log_rate_tile, n_eps
 from .state import STATUS, MCState, Snapshots
 
 __all__ = ["CapacityWarning", "min_capacity"]
@@ -70,6 +70,10 @@ class _Cfg:
     tail_events: float = 0.0
     # ln G_c of the tail-count refinement of the distribution zoom (grouping.count_nodes); None = off
     count_zoom: float | None = None
+    # species per block of the per-event passes over the active prefix [0, hi) (kernel tiles; the
+    # cheap passes, sums and searches, use 4x this); per-event work is O(hi), independent of the
+    # capacity. 128 was fastest of 64/128/256/512 for Ns* = 2000 (~600 live species) on 2 CPU cores.
+    block: int = 128
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -90,11 +94,6 @@ def _zhat(cfg, logm, st_log_mstar, xp, fp):
         zt = jnp.minimum(jnp.interp(logm, xp[:nb], fp[:nb]), jnp.interp(logm, xp[nb:], fp[nb:]))
         return jnp.maximum(jnp.floor(zt), 0.0).astype(jnp.int32)
     return G.zoom_target_distribution(logm, xp, fp)
-
-
-def _row(cfg, p, arrays, a):
-    m, logm, psi, w, z, valid = arrays
-    return log_rate_row(p["kernel"], a, logm, psi, w, z, valid, p["log2_feps"], cfg.rounding)
 
 
 def _arrays(st):
@@ -127,8 +126,16 @@ def _fill(cfg, p, st, t_new):
 
 
 def _ns_hi_equal_mass(cfg):
-    """Species count above which an equal-mass run merges (default 0.9 S, below the emergency level)."""
+    """Capacity part of the equal-mass merge threshold (0.9 S, below the emergency level)."""
     return min(math.floor(0.9 * cfg.capacity), cfg.capacity - cfg.n_prod - 3)
+
+
+def _ns_hi_em(cfg, ns_target):
+    """Species count above which an equal-mass run merges: 2 Ns* (thesis ch. 6: merging at Ns = 2 Ns*),
+    or 0.9 S when the capacity is smaller. Without the 2 Ns* rule the demagnification leftovers (MC
+    hazard 3) let the count drift to ~7 Ns* (measured: 671 species for Ns* = 100 at t = 10, sum kernel),
+    and the cost per event grows with it."""
+    return jnp.minimum(_ns_hi_equal_mass(cfg), jnp.floor(2.0 * ns_target))
 
 
 def min_capacity(grouping, ns_target, n_products=1):
@@ -181,22 +188,37 @@ def _stop(st, cond, flag):
     return st._replace(done=st.done | cond, status=jnp.where(cond, st.status | flag, st.status))
 
 
-def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
-    """Incremental row-sum update for the touched slots T (rate design B, docs/design_notes.md)."""
-    if cfg.rates == "full":
-        return st._replace(dirty=jnp.array(True))
-    Lold = jax.vmap(lambda a: _row(cfg, p, st_old_arrays, a))(T)
-    Lnew = jax.vmap(lambda a: _row(cfg, p, _arrays(st), a))(T)
-    eo = jnp.where(Tmask[:, None], jnp.exp(Lold - st.s), 0.0)
-    en_all = jnp.exp(Lnew - st.s)
-    en = jnp.where(Tmask[:, None], en_all, 0.0)
-    R = st.R + jnp.sum(en - eo, axis=0)
-    R = R.at[T].set(jnp.sum(en_all, axis=1))
-    tot = jnp.sum(jnp.where(jnp.isfinite(R), jnp.abs(R), 0.0))
-    neg = jnp.any(R < -1e-9 * tot)
-    over = jnp.max(Lnew) - st.s > 600.0
-    R = jnp.maximum(R, 0.0)
-    return st._replace(R=R, dirty=st.dirty | neg | over)
+def _B(cfg, cheap=False):
+    """Block length of the passes over the active prefix (cheap passes: 4x the kernel-tile block)."""
+    return min(cfg.capacity, cfg.block * (4 if cheap else 1))
+
+
+def _nblocks(cfg, cheap=False):
+    B = _B(cfg, cheap)
+    return -(-cfg.capacity // B)
+
+
+def _sl(x, start, B):
+    return jax.lax.dynamic_slice_in_dim(x, start, B, axis=0)
+
+
+def _fold(cfg, n, body, init, cheap=False):
+    """Fold ``body(k, start, idx, fresh, carry)`` over the blocks k = 0 .. ceil(n/B) - 1 of [0, n).
+
+    The last block's start is clamped to S - B (so that every slice has the static length B);
+    ``fresh`` marks the slots of block k proper (k B <= idx < n): slots of the clamped block that an
+    earlier block already covered, and slots at or beyond n, are not fresh. Work is O(n), not O(S).
+    """
+    B, S = _B(cfg, cheap), cfg.capacity
+    nb = (jnp.asarray(n, jnp.int32) + (B - 1)) // B
+
+    def f(k, c):
+        st_ = jnp.minimum(k * B, S - B)
+        idx = st_ + jnp.arange(B, dtype=jnp.int32)
+        fresh = (idx >= k * B) & (idx < n)
+        return body(k, st_, idx, fresh, c)
+
+    return jax.lax.fori_loop(jnp.int32(0), nb, f, init)
 
 
 def _pick(u, weights):
@@ -205,11 +227,154 @@ def _pick(u, weights):
     return jnp.minimum(idx, weights.shape[0] - 1)
 
 
+def _pick_blocked(cfg, n, wfn, u_blk, u_in):
+    """Sample a slot in [0, n) with probability ∝ ``wfn(start, idx)`` (non-negative block weights):
+    block sums, one block by ``u_blk``, the slot within it by ``u_in``. Returns (slot, total weight)."""
+    B, S = _B(cfg, True), cfg.capacity
+
+    def body(k, start, idx, fresh, c):
+        return c.at[k].set(jnp.sum(jnp.where(fresh, wfn(start, idx), 0.0)))
+
+    bs = _fold(cfg, n, body, jnp.zeros((_nblocks(cfg, True),), jnp.float64), cheap=True)
+    kb = _pick(u_blk, bs).astype(jnp.int32)
+    start = jnp.minimum(kb * B, S - B)
+    idx = start + jnp.arange(B, dtype=jnp.int32)
+    fresh = (idx >= kb * B) & (idx < n)
+    j = _pick(u_in, jnp.where(fresh, wfn(start, idx), 0.0))
+    return (start + j).astype(jnp.int32), jnp.sum(bs)
+
+
+def _first(cfg, n, pred):
+    """Lowest slot in [0, n) where ``pred(start, idx)`` holds, else S (blocked, O(n))."""
+    S = cfg.capacity
+
+    def body(k, start, idx, fresh, c):
+        return jnp.minimum(c, jnp.min(jnp.where(pred(start, idx) & fresh, idx, S)))
+
+    return _fold(cfg, n, body, jnp.array(S, jnp.int32), cheap=True)
+
+
+def _active(valid):
+    """(hi, ns): one past the highest valid slot, and the number of valid slots (O(S); maintenance only)."""
+    S = valid.shape[0]
+    hi = jnp.max(jnp.where(valid, jnp.arange(1, S + 1, dtype=jnp.int32), 0))
+    return hi.astype(jnp.int32), jnp.sum(valid).astype(jnp.int32)
+
+
+def _props(arrays, T):
+    m, logm, psi, w, z, valid = arrays
+    return logm[T], psi[T], w[T], z[T], valid[T]
+
+
+def _pick_partner(cfg, p, st, a, u_blk, u_in):
+    """Partner b of the selected row a, ∝ Λ'_{a,b} over the active prefix (blocked; the row is
+    never formed over the capacity): block log-sums, one block, the slot within it."""
+    B, S = _B(cfg), cfg.capacity
+    a1 = jnp.reshape(a, (1,)).astype(jnp.int32)
+    la, pa, wa, za, va = _props(_arrays(st), a1)
+
+    def row(start, idx):
+        lm, ps = _sl(st.logm, start, B), _sl(st.psi, start, B)
+        logK = log_kernel_tile(p["kernel"], la, pa, lm, ps)
+        return log_rate_tile(logK, a1, la, wa, za, va, idx, lm, _sl(st.w, start, B), _sl(st.z, start, B),
+                             _sl(st.valid, start, B), p["log2_feps"], cfg.rounding)[0]
+
+    def body(k, start, idx, fresh, c):
+        return c.at[k].set(jax.nn.logsumexp(jnp.where(fresh, row(start, idx), -jnp.inf)))
+
+    lse = _fold(cfg, st.hi, body, jnp.full((_nblocks(cfg),), -jnp.inf))
+    mx = jnp.max(lse)
+    wb = jnp.where(jnp.isfinite(lse), jnp.exp(lse - jnp.where(jnp.isfinite(mx), mx, 0.0)), 0.0)
+    kb = _pick(u_blk, wb).astype(jnp.int32)
+    start = jnp.minimum(kb * B, S - B)
+    idx = start + jnp.arange(B, dtype=jnp.int32)
+    fresh = (idx >= kb * B) & (idx < st.hi)
+    L = jnp.where(fresh, row(start, idx), -jnp.inf)
+    lm = jnp.max(L)
+    j = _pick(u_in, jnp.where(fresh, jnp.exp(L - jnp.where(jnp.isfinite(lm), lm, 0.0)), 0.0))
+    return (start + j).astype(jnp.int32)
+
+
+def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
+    """Incremental row-sum update for the touched slots T (rate design B, docs/design_notes.md).
+
+    One blocked pass over the active prefix [0, hi): for every touched slot t and every slot b the
+    kernel K(m_t, m_b) is evaluated once and serves both the old and the new rate (a slot keeps
+    its mass while it lives: donors and deduplicated products keep theirs, new products take a
+    slot that was free before the event), so the per-entry work is one kernel value, two rate
+    formulas (arithmetic on ln K) and two exponentials. O(hi), independent of the capacity.
+
+    Returns the updated state; also refreshes ``ns`` (valid slots) and, for the maintenance
+    triggers, ``extras`` = (ln max m over valid slots, ln M1, ln M2) of the new state.
+    """
+    if cfg.rates == "full":  # the next event refreshes everything: only the trigger figures here
+        _, ns = _active(st.valid)
+        lg = jnp.where(st.valid, G.log_g(st.w, st.z), -jnp.inf)
+        ext = (jnp.max(jnp.where(st.valid, st.logm, -jnp.inf)), jax.nn.logsumexp(lg + st.logm),
+               jax.nn.logsumexp(lg + 2.0 * st.logm))
+        return st._replace(dirty=jnp.array(True), ns=ns), ext
+    B = _B(cfg)
+    m_o, logm_o, psi_o, w_o, z_o, valid_o = st_old_arrays
+    m_n, logm_n, psi_n, w_n, z_n, valid_n = _arrays(st)
+    T = T.astype(jnp.int32)
+    vo_t, vn_t = valid_o[T], valid_n[T]
+    lm_t = jnp.where(vn_t, logm_n[T], logm_o[T])
+    ps_t = jnp.where(vn_t[:, None], psi_n[T], psi_o[T])
+    wo_t, wn_t, zo_t, zn_t = w_o[T], w_n[T], z_o[T], z_n[T]
+    lwo_t, lwn_t = _safe_log_w(wo_t), _safe_log_w(wn_t)
+    kern, l2f = p["kernel"], p["log2_feps"]
+    s = st.s
+    ninf = jnp.array(-jnp.inf)
+
+    def body(k, start, idx, fresh, c):
+        R, rowsum, lmax, tot, rmin, ns, lmx, l1, l2 = c
+        vo_b, vn_b = _sl(valid_o, start, B), _sl(valid_n, start, B)
+        lmn_b = _sl(logm_n, start, B)
+        lm_b = jnp.where(vn_b, lmn_b, _sl(logm_o, start, B))
+        ps_b = jnp.where(vn_b[:, None], _sl(psi_n, start, B), _sl(psi_o, start, B))
+        wo_b, wn_b, zo_b, zn_b = _sl(w_o, start, B), _sl(w_n, start, B), _sl(z_o, start, B), _sl(z_n, start, B)
+        lwn_b = _safe_log_w(wn_b)
+        logK = log_kernel_tile(kern, lm_t, ps_t, lm_b, ps_b)
+        Lo = log_rate_tile(logK, T, lm_t, wo_t, zo_t, vo_t, idx, lm_b, wo_b, zo_b, vo_b & fresh, l2f, cfg.rounding,
+                           lw_a=lwo_t)
+        Ln = log_rate_tile(logK, T, lm_t, wn_t, zn_t, vn_t, idx, lm_b, wn_b, zn_b, vn_b & fresh, l2f, cfg.rounding,
+                           lw_a=lwn_t, lw_b=lwn_b)
+        eo = jnp.where(Tmask[:, None], jnp.exp(Lo - s), 0.0)
+        en_all = jnp.exp(Ln - s)
+        en = jnp.where(Tmask[:, None], en_all, 0.0)
+        Rb = _sl(R, start, B)
+        Rb_new = jnp.where(fresh, Rb + jnp.sum(en - eo, axis=0), Rb)
+        notT = ~jnp.any(idx[:, None] == T[None, :], axis=1)
+        chk = fresh & notT
+        tot = tot + jnp.sum(jnp.where(chk & jnp.isfinite(Rb_new), jnp.abs(Rb_new), 0.0))
+        rmin = jnp.minimum(rmin, jnp.min(jnp.where(chk, Rb_new, jnp.inf)))
+        R = jax.lax.dynamic_update_slice_in_dim(R, jnp.where(fresh, jnp.maximum(Rb_new, 0.0), Rb), start, axis=0)
+        rowsum = rowsum + jnp.sum(en_all, axis=1)
+        lmax = jnp.maximum(lmax, jnp.max(Ln))
+        live = vn_b & fresh
+        ns = ns + jnp.sum(live).astype(jnp.int32)
+        lmx = jnp.maximum(lmx, jnp.max(jnp.where(live, lmn_b, -jnp.inf)))
+        lg = lwn_b + zn_b.astype(lwn_b.dtype) * LN2
+        l1 = jnp.logaddexp(l1, jax.nn.logsumexp(jnp.where(live, lg + lmn_b, -jnp.inf)))
+        l2 = jnp.logaddexp(l2, jax.nn.logsumexp(jnp.where(live, lg + 2.0 * lmn_b, -jnp.inf)))
+        return R, rowsum, lmax, tot, rmin, ns, lmx, l1, l2
+
+    init = (st.R, jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0.0), jnp.array(jnp.inf), jnp.array(0, jnp.int32),
+            ninf, ninf, ninf)
+    R, rowsum, lmax, tot, rmin, ns, lmx, l1, l2 = _fold(cfg, st.hi, body, init)
+    R = R.at[T].set(rowsum)
+    tot = tot + jnp.sum(jnp.where(jnp.isfinite(rowsum), rowsum, 0.0))
+    neg = rmin < -1e-9 * tot
+    over = lmax - s > 600.0
+    return st._replace(R=R, dirty=st.dirty | neg | over, ns=ns), (lmx, l1, l2)
+
+
 # ----------------------------------------------------------------------------- event
 
 def _collide(cfg, p, st, a, b, key):
     """Execute one (group) event on the species pair {a, b}; returns (state, T, Tmask)."""
     m, logm, psi, w, z, valid = _arrays(st)
+    valid0 = valid  # a new product takes a slot that was free before the event (see _inc_update)
     same = a == b
     za, zb = z[a], z[b]
     a_is_i = (za < zb) | ((za == zb) & ((logm[a] > logm[b]) | ((logm[a] == logm[b]) & (a <= b))))
@@ -263,6 +428,9 @@ def _collide(cfg, p, st, a, b, key):
     # products
     slots = []
     masks = []
+    news = []
+    Bc = _B(cfg, True)
+    hi = st.hi
     for q in range(cfg.n_prod):
         mp = prods.m[q]
         lmp = jnp.where(jnp.isfinite(mp) & (mp > 0), jnp.log(jnp.where(mp > 0, mp, 1.0)), prods.logm[q])
@@ -270,20 +438,29 @@ def _collide(cfg, p, st, a, b, key):
         cnt = prods.count[q] * phi   # phi < 1: the fraction of the event the donors held (above)
         do = prods.valid[q] & (cnt > 0)
         if cfg.dedupe:
-            same_psi = jnp.all(psi == jnp.broadcast_to(psip, psi.shape), axis=1)
-            match = valid & (logm == lmp) & same_psi
-            has = jnp.any(match)
+            def match(start, idx, valid=valid, logm=logm, psi=psi, lmp=lmp, psip=psip):
+                ps = _sl(psi, start, Bc)
+                return (_sl(valid, start, Bc) & (_sl(logm, start, Bc) == lmp)
+                        & jnp.all(ps == jnp.broadcast_to(psip, ps.shape), axis=1))
+            kmatch = _first(cfg, hi, match)
+            has = kmatch < cfg.capacity
         else:
-            match = jnp.zeros_like(valid)
+            kmatch = jnp.array(0, jnp.int32)
             has = jnp.array(False)
-        kfree = jnp.argmin(valid)
-        slot = jnp.where(has, jnp.argmax(match), kfree)
+
+        def free(start, idx, news=tuple(news)):
+            ok = ~_sl(valid0, start, Bc)
+            for sl_ in news:
+                ok = ok & (idx != sl_)
+            return ok
+        kfree = _first(cfg, jnp.minimum(hi + 1 + q, cfg.capacity), free)
+        slot = jnp.where(has, kmatch, jnp.minimum(kfree, cfg.capacity - 1))
         zh = _zhat(cfg, lmp, st.log_mstar, st.zoom_xp, st.zoom_fp)
         wn, zn = G.apply_zoom(cnt, zp, zh)
         w_add = w[slot] + jnp.ldexp(cnt, zp - z[slot])
         new_w = jnp.where(has, w_add, wn)
         new_z = jnp.where(has, z[slot], zn)
-        do = do & (has | ~valid[slot])
+        do = do & (has | ((kfree < cfg.capacity) & ~valid[slot]))
         m = m.at[slot].set(jnp.where(do & ~has, mp, m[slot]))
         logm = logm.at[slot].set(jnp.where(do & ~has, lmp, logm[slot]))
         psi = psi.at[slot].set(jnp.where(do & ~has, psip, psi[slot]))
@@ -292,48 +469,52 @@ def _collide(cfg, p, st, a, b, key):
         valid = valid.at[slot].set(valid[slot] | do)
         slots.append(slot)
         masks.append(do)
+        news.append(jnp.where(do & ~has, slot, -1))
+        hi = jnp.where(do & ~has, jnp.maximum(hi, slot + 1), hi).astype(jnp.int32)
     T = jnp.stack([i, j] + slots)
     Tm = jnp.stack([jnp.array(True), ~same] + masks)
     # mask duplicate entries of T (keep the first occurrence)
     nT = T.shape[0]
     dup = jnp.any((T[:, None] == T[None, :]) & (jnp.arange(nT)[None, :] < jnp.arange(nT)[:, None]) & Tm[None, :], axis=1)
     Tm = Tm & ~dup
-    st = st._replace(m=m, logm=logm, psi=psi, w=w, z=z, valid=valid, M_tot=M_tot)
+    st = st._replace(m=m, logm=logm, psi=psi, w=w, z=z, valid=valid, M_tot=M_tot, hi=hi)
     if cfg.leftover == "stochastic" and cfg.mode != "const_v":
         st = st._replace(logV=jnp.log(M_tot) - st.log_rho_d)
     return st, T, Tm
 
 
 def _duplicate(cfg, p, st, key, u0, log_mp):
-    """Duplication controller (const_n: one group per event; const_ns: thesis §5.3.1, ch. 6)."""
+    """Duplication controller (const_n: one group per event; const_ns: thesis §5.3.1, ch. 6).
+
+    ``u0``: the two uniforms (block, slot) of the first duplication."""
     if cfg.mode == "const_v":
         return st
+    Bc = _B(cfg, True)
+
+    def dup(st, ub, ui):
+        k, _ = _pick_blocked(cfg, st.hi, lambda start, idx: jnp.where(_sl(st.valid, start, Bc), _sl(st.w, start, Bc), 0.0),
+                             ub, ui)
+        old = _arrays(st)
+        M_new = st.M_tot + jnp.ldexp(st.m[k], st.z[k])
+        st2 = st._replace(w=st.w.at[k].add(1.0), M_tot=M_new,
+                          logV=jnp.log(M_new) - st.log_rho_d, n_dup=st.n_dup + 1)
+        return _inc_update(cfg, p, old, st2, k[None], jnp.ones((1,), bool))[0]
+
+    if cfg.mode == "const_n":
+        return dup(st, u0[0], u0[1])
 
     def one(c):
         st, d = c
-        u = jnp.where(d == 0, u0, jax.random.uniform(jax.random.fold_in(key, d), dtype=st.w.dtype))
-        k = _pick(u, jnp.where(st.valid, st.w, 0.0))
-        old = _arrays(st)
-        M_new = st.M_tot + jnp.ldexp(st.m[k], st.z[k])
-        st2 = st._replace(w=st.w.at[k].add(1.0), M_tot=M_new,
-                          logV=jnp.log(M_new) - st.log_rho_d, n_dup=st.n_dup + 1)
-        st2 = _inc_update(cfg, p, old, st2, k[None], jnp.ones((1,), bool))
-        return st2, d + 1
+        ud = jax.random.uniform(jax.random.fold_in(key, d), (2,), dtype=st.w.dtype)
+        ud = jnp.where(d == 0, u0, ud)
+        return dup(st, ud[0], ud[1]), d + 1
 
-    if cfg.mode == "const_n":
-        k = _pick(u0, jnp.where(st.valid, st.w, 0.0))
-        old = _arrays(st)
-        M_new = st.M_tot + jnp.ldexp(st.m[k], st.z[k])
-        st2 = st._replace(w=st.w.at[k].add(1.0), M_tot=M_new,
-                          logV=jnp.log(M_new) - st.log_rho_d, n_dup=st.n_dup + 1)
-        return _inc_update(cfg, p, old, st2, k[None], jnp.ones((1,), bool))
-    ns = jnp.sum(st.valid)
     if cfg.controller == "mass":
         def cond(c):
             st_, d = c
             return (st_.M_tot < p["ns_target"] * jnp.exp(log_mp)) & (d < cfg.d_max)
     else:
-        nd = jnp.where(ns < p["ns_target"], cfg.d_up, 0)
+        nd = jnp.where(st.ns < p["ns_target"], cfg.d_up, 0)
 
         def cond(c):
             return c[1] < nd
@@ -342,14 +523,17 @@ def _duplicate(cfg, p, st, key, u0, log_mp):
 
 
 def _event(cfg, p, st):
-    """One iteration of the inner loop: sample, record, collide, update."""
+    """One iteration of the inner loop: sample, record, collide, update (all passes over the active
+    prefix [0, hi), in blocks: the cost per event does not depend on the capacity)."""
     k = jax.random.fold_in(st.key, st.n_events)
     ku, kout = jax.random.split(k, 2)
-    u = jax.random.uniform(ku, (4,), dtype=st.w.dtype)  # (Δt, a, b, first duplication)
-    total = jnp.sum(st.R)
+    # (Δt, row block, row slot, partner block, partner slot, duplication block, duplication slot)
+    u = jax.random.uniform(ku, (7,), dtype=st.w.dtype)
+    Bc = _B(cfg, True)
+    a, total = _pick_blocked(cfg, st.hi, lambda start, idx: _sl(st.R, start, Bc), u[1], u[2])
     fresh = st.n_since_refresh == 0
     nonfinite = ~jnp.isfinite(total)
-    zero = ~nonfinite & ((total <= 0) | (jnp.sum(st.valid) == 0))
+    zero = ~nonfinite & ((total <= 0) | (st.ns == 0))
     tiny = ~nonfinite & (total < 1e-100)
 
     proceed = ~nonfinite & ~zero & ~(tiny & ~fresh)
@@ -365,28 +549,23 @@ def _event(cfg, p, st):
 
     def do_event(st):
         def go(st):
-            a = _pick(u[1], st.R)
-            row = _row(cfg, p, _arrays(st), a)
-            rmax = jnp.max(row)
-            b = _pick(u[2], jnp.exp(row - rmax))
+            b = _pick_partner(cfg, p, st, a, u[3], u[4])
             old = _arrays(st)
             st2, T, Tm = _collide(cfg, p, st, a, b, kout)
-            st2 = _inc_update(cfg, p, old, st2, T, Tm)
+            st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm)
             st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
-            need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
-            log_mp = _log_mp(st2.logm, st2.w, st2.z, st2.valid) if need_mp else jnp.array(0.0)
-            st2 = _duplicate(cfg, p, st2, kout, u[3], log_mp)
+            log_mp = l2 - l1
+            st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp)
             # maintenance triggers
             rez = jnp.array(False)
             if cfg.grouping == "equal_mass" and cfg.mode != "const_v":
                 rez = jnp.abs(log_mp - st2.zref) > 0.25 * LN2
             elif cfg.grouping == "distribution":
-                lmax = jnp.max(jnp.where(st2.valid, st2.logm, -jnp.inf))
-                rez = (jnp.abs(lmax - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
-            free = cfg.capacity - jnp.sum(st2.valid)
+                rez = (jnp.abs(lmx - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
+            free = cfg.capacity - st2.ns
             cap = free < cfg.n_prod + 2
             if cfg.grouping == "equal_mass":
-                cap = cap | (cfg.capacity - free > _ns_hi_equal_mass(cfg))
+                cap = cap | (cfg.capacity - free > _ns_hi_em(cfg, p["ns_target"]))
             dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
             st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
             return _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
@@ -403,6 +582,61 @@ def _event(cfg, p, st):
 
 
 # ----------------------------------------------------------------------------- maintenance
+
+def _tiles(cfg, p, st, row_fn):
+    """Blocked O(hi^2) pass over the pairs of the active prefix: for every row block, fold
+    ``row_fn(rows, cols) -> (B,) ln-sum`` over the column blocks with logaddexp; returns (S,) ln-sums
+    (−inf for slots outside the prefix)."""
+    B, S = _B(cfg), cfg.capacity
+    lw = _safe_log_w(st.w)
+
+    def blk(start, idx, fresh):
+        return dict(i=idx, logm=_sl(st.logm, start, B), psi=_sl(st.psi, start, B), w=_sl(st.w, start, B),
+                    z=_sl(st.z, start, B), valid=_sl(st.valid, start, B) & fresh, lw=_sl(lw, start, B))
+
+    def row_body(kr, rstart, ridx, rfresh, out):
+        rows = blk(rstart, ridx, rfresh)
+
+        def col_body(kc, cstart, cidx, cfresh, acc):
+            return jnp.logaddexp(acc, row_fn(rows, blk(cstart, cidx, cfresh)))
+
+        acc = _fold(cfg, st.hi, col_body, jnp.full((B,), -jnp.inf))
+        cur = _sl(out, rstart, B)
+        return jax.lax.dynamic_update_slice_in_dim(out, jnp.where(rfresh, acc, cur), rstart, axis=0)
+
+    return _fold(cfg, st.hi, row_body, jnp.full((S,), -jnp.inf))
+
+
+def _refresh(cfg, p, st):
+    """Full recomputation of the scaled row sums (R, s) of Λ' over the active prefix (O(hi^2), blocked;
+    the scale keeps the largest row sum at 1, rows below exp(s - 745) underflow to 0).
+
+    References: Ormel (2008) eq. (5.31); MC hazard 5 in docs/design_notes.md."""
+    def row_fn(r, c):
+        logK = log_kernel_tile(p["kernel"], r["logm"], r["psi"], c["logm"], c["psi"])
+        L = log_rate_tile(logK, r["i"], r["logm"], r["w"], r["z"], r["valid"], c["i"], c["logm"], c["w"], c["z"],
+                          c["valid"], p["log2_feps"], cfg.rounding, lw_a=r["lw"], lw_b=c["lw"])
+        return jax.nn.logsumexp(L, axis=1)
+
+    rlog = _tiles(cfg, p, st, row_fn)
+    rlog = jnp.where(jnp.isnan(rlog), jnp.nan, rlog)
+    s = jnp.max(jnp.where(jnp.isfinite(rlog) | jnp.isnan(rlog), rlog, -jnp.inf))
+    s = jnp.where(jnp.isfinite(s), s, 0.0)
+    R = jnp.exp(rlog - s)
+    R = jnp.where(jnp.isnan(rlog) | (rlog == jnp.inf), jnp.nan, R)
+    return R, s
+
+
+def _particle_rates(cfg, p, st):
+    """ln Σ_b K(m_a, m_b) g_b per slot a over the active prefix (blocked form of
+    :func:`jaxcoag.mc.rates.log_particle_rates`); −inf on invalid slots."""
+    def row_fn(r, c):
+        logK = log_kernel_tile(p["kernel"], r["logm"], r["psi"], c["logm"], c["psi"])
+        lg = jnp.where(c["valid"], c["lw"] + c["z"].astype(logK.dtype) * LN2, -jnp.inf)
+        return jax.nn.logsumexp(logK + lg[None, :], axis=1)
+
+    return jnp.where(st.valid, _tiles(cfg, p, st, row_fn), -jnp.inf)
+
 
 def _rezoom_all(cfg, p, st):
     if cfg.grouping is None:
@@ -421,7 +655,7 @@ def _rezoom_all(cfg, p, st):
         xp, fp = jnp.concatenate([xp, xc]), jnp.concatenate([fp, fc])
     zh = _zhat(cfg, st.logm, st.log_mstar, xp, fp)
     if cfg.tail_events > 0:
-        lr = log_particle_rates(p["kernel"], st.logm, st.psi, st.w, st.z, st.valid) - st.logV
+        lr = _particle_rates(cfg, p, st) - st.logV
         lwm = jnp.log(p["tail_wmax"])
         cap = G.zoom_cap_tail(st.w, st.z, st.valid, lr, st.t, lwm, cfg.tail_events)
         zh = jnp.minimum(zh, cap)
@@ -440,10 +674,11 @@ def _maintenance(cfg, p, st):
         sched = ns > ns_hi
         ns_lo = jnp.floor(0.75 * ns_hi)
     elif cfg.grouping == "equal_mass":
-        # scheduled merge (thesis §5.2.1; Ns_hi = 0.9 S, Ns_lo = 0.7 S): the demagnification
-        # leftovers (MC hazard 3, docs/design_notes.md) are merged with mass neighbours before the slots run out
-        sched = ns > _ns_hi_equal_mass(cfg)
-        ns_lo = jnp.array(float(math.floor(0.7 * S)))
+        # scheduled merge (thesis §5.2.1, ch. 6: Ns_hi = 2 Ns*, here also <= 0.9 S; Ns_lo = 1.5 Ns*,
+        # <= 0.7 S): the demagnification leftovers (MC hazard 3, docs/design_notes.md) are merged with
+        # mass neighbours, which keeps the species count (and the cost per event) within 2 Ns*
+        sched = ns > _ns_hi_em(cfg, p["ns_target"])
+        ns_lo = jnp.minimum(float(math.floor(0.7 * S)), jnp.floor(1.5 * p["ns_target"]))
     else:
         sched = jnp.array(False)
         ns_lo = jnp.array(float(S))
@@ -461,11 +696,12 @@ def _maintenance(cfg, p, st):
     st = jax.lax.cond(do_merge, merge, lambda s: s, st)
     if cfg.grouping is not None:
         st = jax.lax.cond(st.rezoom, lambda s: _rezoom_all(cfg, p, s), lambda s: s, st)
-    L = log_rate_matrix(p["kernel"], st.logm, st.psi, st.w, st.z, st.valid, p["log2_feps"], cfg.rounding)
-    R, s = row_sums(L)
+    hi, ns = _active(st.valid)
+    st = st._replace(hi=hi, ns=ns)
+    R, s = _refresh(cfg, p, st)
     st = st._replace(R=R, s=s, n_since_refresh=jnp.array(0, jnp.int64), dirty=jnp.array(False),
                      rezoom=jnp.array(False))
-    still_full = cfg.capacity - jnp.sum(st.valid) < cfg.n_prod + 2
+    still_full = cfg.capacity - ns < cfg.n_prod + 2
     return _stop(st, still_full, STATUS.CAPACITY)
 
 
@@ -520,7 +756,7 @@ def _blank_state(cfg, m, logm, psi, w, z, valid, logV, M_tot, log_mstar, key, t0
                    zoom_fp=jnp.zeros((_n_nodes(cfg),), f), key=key, k_out=jnp.array(0, jnp.int32),
                    status=jnp.array(0, jnp.int32), done=jnp.array(False), n_dup=jnp.array(0, jnp.int64),
                    n_merge=jnp.array(0, jnp.int64), log_rho_d=jnp.asarray(log_rho_d, f),
-                   log_mlo=jnp.asarray(log_mlo, f), snaps=None)
+                   log_mlo=jnp.asarray(log_mlo, f), snaps=None, hi=_active(valid)[0], ns=_active(valid)[1])
 
 
 def _check_stop(cfg, p, before, after):
@@ -541,7 +777,8 @@ def _start(cfg: _Cfg, p: dict, st: MCState):
                       w=jnp.zeros((T, S), f), z=jnp.zeros((T, S), jnp.int32), valid=jnp.zeros((T, S), bool),
                       logV=jnp.zeros((T,), f), M_tot=jnp.zeros((T,), f), n_events=jnp.zeros((T,), jnp.int64),
                       status=jnp.zeros((T,), jnp.int32))
-    st = st._replace(snaps=snaps, k_out=jnp.array(0, jnp.int32), done=jnp.array(False))
+    hi, ns = _active(st.valid)
+    st = st._replace(snaps=snaps, k_out=jnp.array(0, jnp.int32), done=jnp.array(False), hi=hi, ns=ns)
     full = (cfg.capacity - jnp.sum(st.valid) < cfg.n_prod + 2) & ((st.status & STATUS.CAPACITY) != 0)
     halted = (st.n_events >= p["max_events"]) | ((st.status & STATUS.STOPPED) != 0) | full
     st = st._replace(done=halted)

@@ -169,6 +169,11 @@ class MCState(NamedTuple):
     log_rho_d: jax.Array  # ln of the dust mass density rho_d = M_tot / V at t0 [ln(g cm^-3)], kept by const_n/const_ns
     log_mlo: jax.Array    # ln of the lowest mass of the distribution-method bins [ln g]
     snaps: Snapshots | None
+    # active prefix: every valid slot has index < hi (per-event work runs over blocks of [0, hi),
+    # not over the capacity); ns = number of valid slots. Recomputed from ``valid`` at the start
+    # of every segment and after maintenance (None in a hand-built state is filled in there).
+    hi: jax.Array | None = None
+    ns: jax.Array | None = None
 
 
 # ----------------------------------------------------------------------------- initial states
