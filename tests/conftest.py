@@ -3,6 +3,10 @@
 import os
 
 os.environ.setdefault("XLA_FLAGS", "")
+# `jaxcoag run` / `jaxcoag sweep` turn on JAX's persistent compilation cache (~/.cache/jaxcoag/jax); tests that
+# call the CLI in this process must not switch it on for the whole session (every later compile would be
+# written to disk). tests/test_cli_cache.py sets its own directories.
+os.environ.setdefault("JAXCOAG_CACHE_DIR", "off")
 import jax
 
 jax.config.update("jax_enable_x64", True)
