@@ -156,6 +156,12 @@ class AbstractScheme(eqx.Module):
     def rhs(self, t, y, data) -> jax.Array:
         """Time derivative dy/dt [state units s^-1] at time t [s]."""
 
+    def rhs_structured(self, t, y, data) -> jax.Array:
+        """:meth:`rhs` for solvers that form Jacobians: a scheme with a structured Jacobian
+        overrides it with a ``custom_jvp`` whose rule uses that Jacobian (``TwoBinScheme``);
+        default: :meth:`rhs` itself (Jacobians by N + 1 JVPs)."""
+        return self.rhs(t, y, data)
+
     @abc.abstractmethod
     def mass_per_bin(self, y, grid) -> jax.Array:
         """Mass density per bin [g cm^-3], shape (nbins,)."""

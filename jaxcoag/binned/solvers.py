@@ -1,8 +1,10 @@
 """DustPy-parity linearly-implicit (Rosenbrock-)Euler solver for diffrax.
 
 One step from y_n with step h:  (I - h J) dy = h f(t_n, y_n),  y_{n+1} = y_n + dy, with the
-dense Jacobian J = df/dy at y_n (``jax.jacfwd``) and one LU factorisation (lineax ``LU``, its
-state reused for the error estimate) - DustPy's implicit
+dense Jacobian J = df/dy at y_n (``jax.linearize`` + ``vmap`` over the identity; with the binned
+engine the vector field is ``scheme.rhs_structured``, whose custom JVP rule forms the two-bin
+scheme's structured Jacobian once per step instead of N + 1 JVPs) and one LU factorisation
+(lineax ``LU``, its state reused for the error estimate) - DustPy's implicit
 first-order scheme (Stammler & Birnstiel 2022, §3.2). It is L-stable for linear problems and
 keeps steps bounded by accuracy, not by stiffness (fragmentation equilibria).
 
