@@ -80,8 +80,20 @@ class EqualMass(eqx.Module):
     about the mass m* (const-V: m* = M_tot / ns_target; const-N/Ns: m* = m_p = M2/M1).
     ``MonteCarlo.ns_target`` is the species target Ns*.
 
-    References: Ormel & Spaans (2008) §3.2, eq. (14) (thesis eq. 5.14).
+    Fields:
+        merge_above: merge mass neighbours when the species count exceeds ``merge_above`` x Ns* (down to
+            0.75 of that; default 2, thesis ch. 6), or None: only above 0.9 of the capacity (down to 0.7 S,
+            the pre-issue-17 rule, with which the count drifts to ~7 Ns* at the default 8 Ns* capacity
+            of that rule). Static.
+
+    References: Ormel & Spaans (2008) §3.2, eq. (14) (thesis eq. 5.14); thesis ch. 6 (merging at 2 Ns*).
     """
+
+    merge_above: float | None = eqx.field(static=True, default=2.0)
+
+    def __check_init__(self):
+        _number_field("EqualMass", "merge_above", self.merge_above, lo=1.0, inclusive=False, allow_none=True,
+                      what="species per Ns* above which mass neighbours merge; None = at 0.9 capacity")
 
 
 class Distribution(eqx.Module):
@@ -346,7 +358,9 @@ class MonteCarlo(AbstractEngine):
             d_max=int(getattr(ctl, "d_max", MassController().d_max)), d_up=int(getattr(ctl, "d_up", SpeciesController().d_up)),
             n_bins=int(dist.n_bins), p_protect=int(self.p_protect), weighting=self.merge_weighting,
             dedupe=bool(self.dedupe), n_rezoom=n_rezoom, leftover=self.leftover, tail_events=float(dist.tail_events),
-            count_zoom=math.log(float(dist.count_groups)) if dist.count_groups is not None else None)
+            count_zoom=math.log(float(dist.count_groups)) if dist.count_groups is not None else None,
+            em_merge=float(self.grouping.merge_above) if isinstance(self.grouping, EqualMass)
+            and self.grouping.merge_above is not None else None)
 
     def _params(self, kernel, outcome, t_seg):
         dist = self.grouping if isinstance(self.grouping, Distribution) else None
@@ -381,7 +395,11 @@ class MonteCarlo(AbstractEngine):
             else:
                 if is_traced(self.ns_target):
                     raise JaxcoagInputError("give MonteCarlo(capacity=...) when ns_target is traced (vmapped/jitted)")
-                cap = int(4 * float(self.ns_target)) if grouping == "equal_mass" else int(2 * float(self.ns_target))
+                if grouping == "equal_mass":
+                    f = 8.0 if self.grouping.merge_above is None else 2.0 * float(self.grouping.merge_above)
+                    cap = int(f * float(self.ns_target))
+                else:
+                    cap = int(2 * float(self.ns_target))
                 cap = max(cap, 64)
         cap = int(cap)
         if cap < n_prod + 4:

@@ -74,6 +74,8 @@ class _Cfg:
     # cheap passes, sums and searches, use 4x this); per-event work is O(hi), independent of the
     # capacity. 128 was fastest of 64/128/256/512 for Ns* = 2000 (~600 live species) on 2 CPU cores.
     block: int = 128
+    # equal-mass scheduled merge above em_merge x Ns* (None: above 0.9 S only)
+    em_merge: float | None = 2.0
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -135,7 +137,9 @@ def _ns_hi_em(cfg, ns_target):
     or 0.9 S when the capacity is smaller. Without the 2 Ns* rule the demagnification leftovers (MC
     hazard 3) let the count drift to ~7 Ns* (measured: 671 species for Ns* = 100 at t = 10, sum kernel),
     and the cost per event grows with it."""
-    return jnp.minimum(_ns_hi_equal_mass(cfg), jnp.floor(2.0 * ns_target))
+    if cfg.em_merge is None:
+        return jnp.asarray(float(_ns_hi_equal_mass(cfg)))
+    return jnp.minimum(_ns_hi_equal_mass(cfg), jnp.floor(cfg.em_merge * ns_target))
 
 
 def min_capacity(grouping, ns_target, n_products=1):
@@ -678,7 +682,9 @@ def _maintenance(cfg, p, st):
         # <= 0.7 S): the demagnification leftovers (MC hazard 3, docs/design_notes.md) are merged with
         # mass neighbours, which keeps the species count (and the cost per event) within 2 Ns*
         sched = ns > _ns_hi_em(cfg, p["ns_target"])
-        ns_lo = jnp.minimum(float(math.floor(0.7 * S)), jnp.floor(1.5 * p["ns_target"]))
+        ns_lo = jnp.asarray(float(math.floor(0.7 * S)))
+        if cfg.em_merge is not None:
+            ns_lo = jnp.minimum(ns_lo, jnp.floor(0.75 * cfg.em_merge * p["ns_target"]))
     else:
         sched = jnp.array(False)
         ns_lo = jnp.array(float(S))
