@@ -66,6 +66,24 @@ def _fd_regression(dist):
     return float(np.polyfit(np.log(r[ok]), np.log(k[ok]), 1)[0])
 
 
+def _power_law_panel(ax, na, y, slope, ylabel, title):
+    """log-log panel of ``y`` over aggregates of N_a >= 2 with its fitted power law (slope from
+    ``diag.power_law``; no line when the fit failed)."""
+    import numpy as np
+
+    from jaxcoag.aggregates.rigid import diagnostics as diag
+
+    big = na >= 2
+    ax.loglog(na[big], y[big], "k.", ms=4)
+    if math.isfinite(slope):
+        x = np.array([2, na.max()], float)
+        ax.loglog(x, np.exp(diag.power_law(na, y)[2]) * x**slope, "k-", lw=0.8, label=f"slope {slope:.3f}")
+        ax.legend(fontsize=8)
+    ax.set_xlabel("$N_a$")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+
+
 def main(argv=None):
     args = _common.parse_args(argv, __doc__)
     jax = _common.enable_x64()
@@ -210,16 +228,7 @@ def main(argv=None):
         axx.set_xlabel("m / $m_0$")
         axx.set_ylabel("$n_k$")
         axx.set_title(f"R-Fig 9{lab}: spectrum at t = {t_out[i]:g}", fontsize=10)
-    big = na >= 2
-    c = fig.add_subplot(gs[1, 0])
-    c.loglog(na[big], ag["Rmax"][big], "k.", ms=4)
-    if math.isfinite(s_r):
-        x = np.array([2, na.max()], float)
-        c.loglog(x, np.exp(diag.power_law(na, ag["Rmax"])[2]) * x**s_r, "k-", lw=0.8, label=f"slope {s_r:.3f}")
-        c.legend(fontsize=8)
-    c.set_xlabel("$N_a$")
-    c.set_ylabel("$R_{max}$")
-    c.set_title("R-Fig 10a: size (R95: 0.52)", fontsize=10)
+    _power_law_panel(fig.add_subplot(gs[1, 0]), na, ag["Rmax"], s_r, "$R_{max}$", "R-Fig 10a: size (R95: 0.52)")
     d = fig.add_subplot(gs[1, 1])
     okf = np.isfinite(ag["f_D"])
     d.errorbar(na[okf], ag["f_D"][okf], yerr=ag["f_D_err"][okf], fmt="k.", ms=3, lw=0.5)
@@ -230,15 +239,8 @@ def main(argv=None):
     d.set_xlabel("$N_a$")
     d.set_ylabel("$f_D$")
     d.set_title("R-Fig 10b: fractal dimension (R95: 2.0)", fontsize=10)
-    e = fig.add_subplot(gs[1, 2])
-    e.loglog(na[big], ag["rho"][big], "k.", ms=4)
-    if math.isfinite(gam):
-        x = np.array([2, na.max()], float)
-        e.loglog(x, np.exp(diag.power_law(na, ag["rho"])[2]) * x**gam, "k-", lw=0.8, label=f"slope {gam:.3f}")
-        e.legend(fontsize=8)
-    e.set_xlabel("$N_a$")
-    e.set_ylabel(r"$\rho$")
-    e.set_title(r"R-Fig 10c: density (R95: $\gamma$ = -0.55)", fontsize=10)
+    _power_law_panel(fig.add_subplot(gs[1, 2]), na, ag["rho"], gam, r"$\rho$",
+                     r"R-Fig 10c: density (R95: $\gamma$ = -0.55)")
     g = fig.add_subplot(gs[1, 3])
     for j, (ls, nm) in enumerate(zip(("-", "--", ":"), "xyz")):
         g.plot(t_out, sig[:, j], "k" + ls, label=rf"$\sigma_{nm}$")

@@ -309,7 +309,9 @@ def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
     formulas (arithmetic on ln K) and two exponentials. O(hi), independent of the capacity.
 
     Returns the updated state; also refreshes ``ns`` (valid slots) and, for the maintenance
-    triggers, ``extras`` = (ln max m over valid slots, ln M1, ln M2) of the new state.
+    triggers, ``extras`` = (ln max m over valid slots, ln M1, ln M2) of the new state (−inf where
+    the run's maintenance rules do not use them: ln max m for distribution grouping only, ln M1/M2
+    for constant-Ns and non-constant-volume equal-mass runs).
     """
     if cfg.rates == "full":  # the next event refreshes everything: only the trigger figures here
         _, ns = _active(st.valid)
@@ -329,6 +331,10 @@ def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
     kern, l2f = p["kernel"], p["log2_feps"]
     s = st.s
     ninf = jnp.array(-jnp.inf)
+    # trigger figures only where the maintenance rules read them (static): the M1/M2 log-sums cost two
+    # exponentials per slot and are not needed in constant-volume runs
+    need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
+    need_lmx = cfg.grouping == "distribution"
 
     def body(k, start, idx, fresh, c):
         R, rowsum, lmax, tot, rmin, ns, lmx, l1, l2 = c
@@ -357,10 +363,12 @@ def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
         lmax = jnp.maximum(lmax, jnp.max(Ln))
         live = vn_b & fresh
         ns = ns + jnp.sum(live).astype(jnp.int32)
-        lmx = jnp.maximum(lmx, jnp.max(jnp.where(live, lmn_b, -jnp.inf)))
-        lg = lwn_b + zn_b.astype(lwn_b.dtype) * LN2
-        l1 = jnp.logaddexp(l1, jax.nn.logsumexp(jnp.where(live, lg + lmn_b, -jnp.inf)))
-        l2 = jnp.logaddexp(l2, jax.nn.logsumexp(jnp.where(live, lg + 2.0 * lmn_b, -jnp.inf)))
+        if need_lmx:
+            lmx = jnp.maximum(lmx, jnp.max(jnp.where(live, lmn_b, -jnp.inf)))
+        if need_mp:
+            lg = lwn_b + zn_b.astype(lwn_b.dtype) * LN2
+            l1 = jnp.logaddexp(l1, jax.nn.logsumexp(jnp.where(live, lg + lmn_b, -jnp.inf)))
+            l2 = jnp.logaddexp(l2, jax.nn.logsumexp(jnp.where(live, lg + 2.0 * lmn_b, -jnp.inf)))
         return R, rowsum, lmax, tot, rmin, ns, lmx, l1, l2
 
     init = (st.R, jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0.0), jnp.array(jnp.inf), jnp.array(0, jnp.int32),
@@ -457,7 +465,7 @@ def _collide(cfg, p, st, a, b, key):
             for sl_ in news:
                 ok = ok & (idx != sl_)
             return ok
-        kfree = _first(cfg, jnp.minimum(hi + 1 + q, cfg.capacity), free)
+        kfree = _first(cfg, jnp.minimum(hi + 1, cfg.capacity), free)  # without a hole below hi, slot hi
         slot = jnp.where(has, kmatch, jnp.minimum(kfree, cfg.capacity - 1))
         zh = _zhat(cfg, lmp, st.log_mstar, st.zoom_xp, st.zoom_fp)
         wn, zn = G.apply_zoom(cnt, zp, zh)
@@ -558,7 +566,8 @@ def _event(cfg, p, st):
             st2, T, Tm = _collide(cfg, p, st, a, b, kout)
             st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm)
             st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
-            log_mp = l2 - l1
+            need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
+            log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
             st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp)
             # maintenance triggers
             rez = jnp.array(False)
