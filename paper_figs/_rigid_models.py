@@ -10,7 +10,8 @@ numbers the figures need, as plain lists (JSON-ready):
   mass / m0 (R95 Figs. 3-5, 7: panels a, b);
 * the mass spectrum n_k at the spectrum times (panels c, d; stored sparse as [k, n_k] pairs);
 * per live aggregate at the last output: N_a, mass, R_max (R7), density M / ((4/3) pi R_max^3), f_D and its
-  regression error (R95 §3; Figs. 6, 8).
+  regression error (R95 §3; Figs. 6, 8), and f_D from the centre distances (``f_D_centre``: R95 does not say
+  whether its sorted distances reach the sphere centres or edges).
 
 Set-up (R95 §3, Table I): spheres of radius r0 = 0.1, box side 10 (N0 / 1000)^(1/3) (R95's number density for
 any N0), rms speed v0 = 13 (R95 does not print it; its t_1/2 suggests ~13), seeds = ``jax.random.key(s)``.
@@ -79,6 +80,7 @@ def summarize(res, spectrum_idx) -> dict:
     Ms = np.sort(M, axis=-1)
     spec = np.asarray(res.mass_spectrum())
     ag = res.aggregates(-1)
+    ag_c = res.aggregates(-1, include_radius=False)   # centre distances: the other reading of R95 §3
     out = dict(
         t=np.asarray(res.t).tolist(),
         N=np.asarray(res.n_aggregates).astype(int).tolist(),
@@ -91,7 +93,8 @@ def summarize(res, spectrum_idx) -> dict:
         n_steps=int(np.asarray(o["n_steps"])[-1]),
         status=RESULT_NAMES[int(np.asarray(result_code(res.status)))],
         spectra={},
-        aggregates={k: np.asarray(ag[k]).tolist() for k in ("n_a", "mass", "Rmax", "rho", "f_D", "f_D_err")},
+        aggregates=dict({k: np.asarray(ag[k]).tolist() for k in ("n_a", "mass", "Rmax", "rho", "f_D", "f_D_err")},
+                        f_D_centre=np.asarray(ag_c["f_D"]).tolist(), f_D_centre_err=np.asarray(ag_c["f_D_err"]).tolist()),
     )
     for i in spectrum_idx:
         nz = np.nonzero(spec[i])[0]

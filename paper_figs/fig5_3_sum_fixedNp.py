@@ -7,7 +7,8 @@ m_p = M2/M1 = e^t). The method is fine for t < 10, lags at t = 20 and fails at t
 simulated mass M_tot,sim = Np <m>_sim ~ Np e^{15} lies below the analytic peak mass e^{30}
 (one-particle line crossed at t ~ 2 ln Np), so m_p <= M_tot,sim < e^{30} deterministically.
 Check points (thesis Figs. 2.9a, 5.3): t = 1 passes the F2.8 tolerances (ensemble-mean ln M0 and ln m_p
-within 4 sqrt((1+ln GF)/(Np R)), E_mass <= 1.5x noise floor); at t = 30 max over runs of
+within 4 sqrt((1+ln GF)/(Np R)), E_mass <= 1.5x noise floor, plus 3 standard errors of
+the R-run mean); at t = 30 max over runs of
 M_tot,sim/e^{30} < 1 (deterministic bound) and the ensemble-mean ln(m_p/e^t) < -1 (failure shown).
 The crossing time 2 ln Np < 30 is a property of the chosen Np, not of the simulation: it is printed
 as an info row and does not count toward the pass flag.
@@ -88,7 +89,7 @@ def main(argv=None):
         rho_a = analytic.mass_per_bin("sum", edges, t, coeff=0.5)
         n_a = analytic.number_per_bin("sum", edges, t, coeff=0.5)
         e_runs = tv_error(rho[:, it], rho_a)
-        floor = noise_floor(n_a, rho_a, n_p, rng)
+        floor, floor_sd = noise_floor(n_a, rho_a, n_p, rng, return_sd=True)
         print(f"t={t:>4g}: M0 sim {np.exp(lm0[:, it]).mean():.5g} vs {math.exp(-t / 2):.5g}; m_p sim "
               f"{np.exp(lmp[:, it]).mean():.4g} vs {mpa:.4g} (ln ratio {np.mean(lmp[:, it] - t):+.3f}); "
               f"M_tot,sim {mtot[:, it].mean():.3g}; E_mass {e_runs.mean():.3f} (floor {floor:.3f})")
@@ -96,7 +97,12 @@ def main(argv=None):
             tol = 4.0 * math.sqrt((1.0 + t / 2) / (n_p * runs))
             ck.add("mean ln(M0/M0A) t=1", np.mean(lm0[:, it] + t / 2), 0.0, tol, absolute=True)
             ck.add("mean ln(mp/mpA) t=1", np.mean(lmp[:, it] - t), 0.0, tol, absolute=True)
-            ck.add("E_mass/E_floor t=1 (<=1.5)", e_runs.mean() / floor, 0.0, 1.5, absolute=True)
+            # the thesis bound (1.5 floors) holds for the expected E_mass; the mean of `runs` runs
+            # scatters about it by ~sd/sqrt(runs) (one ideal 1000-particle sample: sd ~0.4 floor), so
+            # the bound gets 3 of those: the old and the new engine both gave 0.84-1.69 over 8 seeds
+            # of 3 runs (mean 1.13 / 1.14), and 1.5 alone failed one seed in eight for each
+            etol = 1.5 + 3.0 * floor_sd / (floor * math.sqrt(runs))
+            ck.add("E_mass/E_floor t=1 (<=1.5+3sd/sqrt(R))", e_runs.mean() / floor, 0.0, etol, absolute=True)
         if t == 30.0:
             ck.add("max M_tot,sim / e^30 (<1, deterministic)", np.max(mtot[:, it]) / mpa, 0.0, 1.0, absolute=True)
             ck.add("max m_p,sim / M_tot,sim (<=1)", np.max(np.exp(lmp[:, it]) / mtot[:, it]), 0.0, 1.0, absolute=True)

@@ -271,6 +271,37 @@ def test_fractional_multiplicity_event_is_partial_and_mass_exact():
     assert float(np.asarray(out.w)[v & (np.asarray(out.m) == 1.0)][0]) == 1.75
 
 
+def test_partial_event_slivers_fold_into_the_product():
+    """MC hazard 15b: a partial event (phi < 1) must not leave slivers that run at a whole particle's rate.
+    (a) a runaway (w = 1, m = 1e6) meets a partner holding w = 1e-8: before, a product of count 1e-8 at the
+    runaway's mass beside the runaway's 1 - 1e-8 (a 'ghost' that grew past the total mass: Fig. 5.6's gel
+    took > 2e5 events instead of ~6e4); now one whole particle of mass 1e6 + 1e-8. (b) a partner holding
+    1 - 1e-12 leaves the runaway a leftover of 1e-12: folded into the product. Mass exact in both."""
+    R, cfg, p, st = _hand_state([1e6, 1.0], [1.0, 1e-8], [0, 0])
+    p = dict(p, log2_feps=jnp.log2(1e-3))
+    out, T, Tm = _collide_jit(cfg, p, st, jnp.int32(0), jnp.int32(1), jax.random.key(0))
+    v = np.asarray(out.valid)
+    assert int(v.sum()) == 1
+    np.testing.assert_allclose(float(np.asarray(out.w)[v][0]), 1.0, rtol=1e-15)
+    np.testing.assert_allclose(float(np.asarray(out.m)[v][0]), 1e6 + 1e-8, rtol=1e-14)   # log-space mean
+    np.testing.assert_allclose(_mass(out), _mass(st), rtol=1e-15)
+    R, cfg, p, st = _hand_state([10.0, 5.0], [1.0, 1.0 - 1e-12], [0, 0])
+    p = dict(p, log2_feps=jnp.log2(1e-3))
+    out, T, Tm = _collide_jit(cfg, p, st, jnp.int32(1), jnp.int32(0), jax.random.key(0))
+    v = np.asarray(out.valid)
+    assert int(v.sum()) == 1
+    np.testing.assert_allclose(float(np.asarray(out.w)[v][0]), 1.0, rtol=1e-15)
+    np.testing.assert_allclose(_mass(out), _mass(st), rtol=1e-15)
+    # a real fraction is kept: w_j = 0.3 of a partner half the runaway's mass (product 1.5x the donor)
+    R, cfg, p, st = _hand_state([10.0, 5.0], [1.0, 0.3], [0, 0])
+    p = dict(p, log2_feps=jnp.log2(1e-3))
+    out, T, Tm = _collide_jit(cfg, p, st, jnp.int32(0), jnp.int32(1), jax.random.key(0))
+    v = np.asarray(out.valid)
+    assert sorted(zip(np.asarray(out.m)[v].tolist(), np.round(np.asarray(out.w)[v], 12).tolist())) == [(10.0, 0.7),
+                                                                                                       (15.0, 0.3)]
+    np.testing.assert_allclose(_mass(out), _mass(st), rtol=1e-15)
+
+
 class _FragKernel(K.AbstractKernel):
     """K = 1 cm^3 s^-1 with dv^2 = (m1 + m2)/m0 [cm^2 s^-2]: with VfragShatter(v_frag = 3 cm/s, linear,
     width 0.5) pairs of >= 5 monomers may shatter, pairs of >= 14 always do."""

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -383,6 +384,66 @@ def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
 
 # ----------------------------------------------------------------------------- event
 
+class _Folded(NamedTuple):
+    products: object
+    folded: jax.Array
+
+
+def _fold_leftovers(p, prods, phi, zp, m, logm, w, z, i, j, same):
+    """Partial events: fold a donor's leftover into the heaviest product (MC hazard 15b) [own].
+
+    Returns the products with their counts already scaled by phi, and which donor (i, j) was
+    folded (emptied). A partial event (phi < 1, module ``rates``) leaves slivers: a runaway of
+    w = 1 meeting a partner that holds w = 1.6e-8 (round-off of merged weights) became a product
+    of w = 1.6e-8 at the runaway's mass beside the runaway's w = 1 - 1.6e-8. Such a sliver has the
+    rate of a whole particle (rate / phi) but carries almost nothing: it grows as a second runaway,
+    past the total mass, and its rate shrinks the time step (the product-kernel gel of thesis
+    Fig. 5.6 took > 2e5 events instead of 5.5e4). A donor's leftover is therefore merged into the
+    heaviest product (counts add, particle mass the mass-weighted mean: mass and number exact) when
+    (a) it is a z = 0 sliver (0 < w < 1) with at most f_eps of the product's mass, or
+    (b) the event was partial and the product's particle mass is within a factor 1 + f_eps of the
+        donor's (a sticking event of the heavier member: its group grows by phi n_c m_j instead of
+        splitting into a product of count phi and a leftover of 1 - phi).
+    Either way a particle mass moves by at most the fraction f_eps that the method allows per
+    event. Real fragment fractions (products far lighter than the donors) are left as they are.
+    """
+    dt = logm.dtype
+    lfeps = p["log2_feps"] * LN2
+    cnt = prods.count * phi
+    ok = prods.valid & (cnt > 0)
+    lc = jnp.where(ok, jnp.log(jnp.where(ok, cnt, 1.0)), -jnp.inf) + zp.astype(dt) * LN2   # ln(count 2^zp)
+    log_tot = lc + prods.logm
+    q = jnp.argmax(log_tot)
+    lt_q, lc_q, lm_p = log_tot[q], lc[q], prods.logm[q]
+    lc_0 = lc_q
+    folded, parts = [], []
+    for s_, use in ((i, jnp.array(True)), (j, ~same)):
+        left = w[s_]
+        pos = left > 0
+        lcs = jnp.log(jnp.where(pos, left, 1.0)) + z[s_].astype(dt) * LN2                   # ln(w 2^z)
+        lL = lcs + logm[s_]
+        sliver = (z[s_] == 0) & (left < 1.0) & (lL <= lt_q + lfeps)
+        near = (phi < 1.0) & (jnp.abs(lm_p - logm[s_]) <= jnp.log1p(jnp.exp(lfeps)))
+        f = use & ok[q] & pos & (sliver | near)
+        lt_q = jnp.where(f, jnp.logaddexp(lt_q, lL), lt_q)
+        lc_q = jnp.where(f, jnp.logaddexp(lc_q, lcs), lc_q)
+        folded.append(f)
+        parts.append((f, lcs, s_))
+    any_f = folded[0] | folded[1]
+    # new particle mass: the count-weighted mean, in linear space where the masses are finite (weights
+    # <= 1 summing to 1: round-off ~1e-16, where ln-space sums lose ~ln(m) 1e-16), else in ln space
+    mp_lin = jnp.exp(lc_0 - lc_q) * prods.m[q]
+    for f, lcs, s_ in parts:
+        mp_lin = mp_lin + jnp.where(f, jnp.exp(lcs - lc_q) * m[s_], 0.0)
+    lin = jnp.isfinite(mp_lin) & (mp_lin > 0)
+    lm_q = jnp.where(lin, jnp.log(jnp.where(lin, mp_lin, 1.0)), lt_q - lc_q)
+    lm_q = jnp.where(any_f, lm_q, prods.logm[q])
+    cnt = cnt.at[q].set(jnp.where(any_f, jnp.exp(lc_q - zp.astype(dt) * LN2), cnt[q]))
+    lmq = prods.logm.at[q].set(lm_q)
+    mq = prods.m.at[q].set(jnp.where(any_f, jnp.where(lin, mp_lin, jnp.exp(lm_q)), prods.m[q]))
+    return _Folded(prods._replace(m=mq, logm=lmq, count=cnt), jnp.stack(folded))
+
+
 def _collide(cfg, p, st, a, b, key):
     """Execute one (group) event on the species pair {a, b}; returns (state, T, Tmask)."""
     m, logm, psi, w, z, valid = _arrays(st)
@@ -419,6 +480,10 @@ def _collide(cfg, p, st, a, b, key):
     # demagnify below); for same = True, j = i and dw_j = 0 leave the updated w[i] as it is
     w = w.at[i].set(jnp.maximum(w[i] - phi * dw_i, 0.0))
     w = w.at[j].set(jnp.maximum(w[j] - phi * dw_j, 0.0))
+    prods = _fold_leftovers(p, prods, phi, zp, m, logm, w, z, i, j, same)
+    w = w.at[i].set(jnp.where(prods.folded[0], 0.0, w[i]))
+    w = w.at[j].set(jnp.where(prods.folded[1], 0.0, w[j]))
+    prods = prods.products
     M_tot = st.M_tot
     for idx, s_ in enumerate((i, j)):
         if cfg.leftover == "stochastic":
@@ -447,7 +512,7 @@ def _collide(cfg, p, st, a, b, key):
         mp = prods.m[q]
         lmp = jnp.where(jnp.isfinite(mp) & (mp > 0), jnp.log(jnp.where(mp > 0, mp, 1.0)), prods.logm[q])
         psip = prods.psi[q]
-        cnt = prods.count[q] * phi   # phi < 1: the fraction of the event the donors held (above)
+        cnt = prods.count[q]   # times phi (the fraction of the event the donors held), folds added
         do = prods.valid[q] & (cnt > 0)
         if cfg.dedupe:
             def match(start, idx, valid=valid, logm=logm, psi=psi, lmp=lmp, psip=psip):

@@ -1040,21 +1040,25 @@ class BoxResult(AbstractResult):
         return jax.vmap(lambda kk: jnp.bincount(kk, length=kmax + 1)[1:])(jnp.minimum(k, kmax + 1) *
                                                                           (k <= kmax))
 
-    def aggregates(self, i=-1):
+    def aggregates(self, i=-1, *, include_radius=True, min_members=3):
         """Per-aggregate properties at output i (numpy, live slots only): dict of ``slot``, ``n_a`` (members),
         ``mass``, ``Rmax`` (R7), ``rho`` = M/((4/3)π R_max³), ``f_D`` and ``f_D_err`` (sorted-distance
-        regression, NaN for N_a < 3), ``ke`` (translational + rotational)."""
+        regression, NaN for N_a < ``min_members``; ``include_radius``: distances to the sphere edges
+        r + R (default) or to the centres r, the convention R95 leaves open:
+        :func:`~jaxcoag.aggregates.rigid.diagnostics.fractal_dimension`), ``ke`` (translational + rotational)."""
         o = {k: np.asarray(v[i]) for k, v in self.outs.items() if np.ndim(v) >= 2}
-        fd, err = diag.fractal_dimension(o["sph_r"], o["sph_agg"], np.asarray(self.final_state.sph_R))
+        fd, err = diag.fractal_dimension(o["sph_r"], o["sph_agg"], np.asarray(self.final_state.sph_R),
+                                         include_radius=include_radius, min_members=min_members)
         sl = np.nonzero(o["alive"])[0]
         Rm = o["Rmax"][sl]
         return dict(slot=sl, n_a=o["nmem"][sl], mass=o["M"][sl], Rmax=Rm,
                     rho=diag.density(o["M"][sl], Rm), f_D=np.asarray(fd)[sl], f_D_err=np.asarray(err)[sl],
                     ke=o["ke_trans"][sl] + o["ke_rot"][sl])
 
-    def fractal_dimension(self, i=-1):
-        """(f_D per live aggregate, its standard error, weighted mean f_D, its standard error) at output i (R95 §3)."""
-        ag = self.aggregates(i)
+    def fractal_dimension(self, i=-1, *, include_radius=True, min_members=3):
+        """(f_D per live aggregate, its standard error, weighted mean f_D, its standard error) at output i (R95 §3);
+        ``include_radius``, ``min_members``: as in :meth:`aggregates`."""
+        ag = self.aggregates(i, include_radius=include_radius, min_members=min_members)
         mean, err = diag.weighted_mean(ag["f_D"], ag["f_D_err"])
         return ag["f_D"], ag["f_D_err"], mean, err
 
