@@ -909,10 +909,9 @@ def initial_number(cfg: RunConfig, grid, rho_g) -> np.ndarray:
 
 def _binned_solver(cfg: RunConfig, rho_d):
     """diffrax solver of [solver] method (None = the engine's automatic choice: Tsit5 for pure growth,
-    Kvaerno5 + Newton with fragmentation); rho_d [g cm^-3] is the total dust mass the Newton
+    Kvaerno5 + chord with fragmentation); rho_d [g cm^-3] is the total dust mass the root-finder
     tolerance of an explicitly asked Kvaerno5 refers to (as the engine's own, 1e-3 atol M_tot)."""
     import diffrax
-    import optimistix as optx
 
     from .binned import LinearlyImplicitEuler
 
@@ -923,7 +922,9 @@ def _binned_solver(cfg: RunConfig, rho_d):
     if m == "linearly_implicit_euler":
         return LinearlyImplicitEuler()
     if m == "kvaerno5" and not cfg.has_fragmentation:
-        return diffrax.Kvaerno5(root_finder=optx.Newton(rtol=so["rtol"], atol=1e-3 * so["atol"] * rho_d))
+        from .binned.solve import default_implicit_solver
+
+        return default_implicit_solver(so["rtol"], 1e-3 * so["atol"] * rho_d)
     return None
 
 

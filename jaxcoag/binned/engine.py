@@ -161,17 +161,18 @@ class Binned(AbstractEngine):
 
     def solver_name(self, outcome=None) -> str:
         """Name of the time integrator this engine uses with ``outcome``: "Tsit5" (pure coagulation)
-        or "Kvaerno5+Newton" (with fragmentation) for the automatic choice, else the class name of
-        the given diffrax solver (e.g. "LinearlyImplicitEuler")."""
+        or "Kvaerno5+Chord" (with fragmentation: Kvaerno5 with a chord iteration and a fresh Jacobian
+        per stage, ``jaxcoag.binned.solve.Kvaerno5Stagewise``) for the automatic choice, else the class
+        name of the given diffrax solver (e.g. "LinearlyImplicitEuler")."""
         if self.solver is None:
-            return "Tsit5" if _fragmentation(outcome) is None else "Kvaerno5+Newton"
+            return "Tsit5" if _fragmentation(outcome) is None else "Kvaerno5+Chord"
         return type(self.solver).__name__
 
     def _advance(self, kernel, state, t_seg, outcome):
         solver = self.solver
         frag = _fragmentation(outcome)
         if solver is None:
-            solver = diffrax.Tsit5() if frag is None else "kvaerno5"  # Kvaerno5 + Newton, built inside
+            solver = diffrax.Tsit5() if frag is None else "kvaerno5"  # Kvaerno5 + chord per stage, built inside
         adjoint = diffrax.RecursiveCheckpointAdjoint() if self.adjoint is None else self.adjoint
         meter = diffrax.NoProgressMeter() if self.progress_meter is None else self.progress_meter
         t_seg = jnp.asarray(t_seg, jnp.float64)
@@ -221,7 +222,7 @@ class BinnedResult(AbstractResult):
         dt: step size [s] the solve would continue with after ``t[-1]`` (passing the result as
             ``initial`` continues from it instead of restarting from a tiny ``dt0``).
         solver: name of the time integrator used (static str): "Tsit5" (automatic, pure
-            coagulation), "Kvaerno5+Newton" (automatic, with fragmentation) or the class name of
+            coagulation), "Kvaerno5+Chord" (automatic, with fragmentation) or the class name of
             the diffrax solver given to ``Binned(solver=...)``.
     """
 

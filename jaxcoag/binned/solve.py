@@ -43,6 +43,28 @@ from .twobin import TwoBinScheme
 __all__ = ["steady_state", "SteadyState", "CarriedStepController"]
 
 
+class Kvaerno5Stagewise(diffrax.Kvaerno5):
+    """diffrax's Kvaerno5 (ESDIRK 5(4)) with a fresh Jacobian at every implicit stage
+    (``diffrax.CalculateJacobian.every_stage``) for a chord root finder: one Jacobian and one LU per
+    stage, reused over that stage's iterations.
+
+    The default implicit solver of the binned engine, with ``optimistix.Chord``. On the default
+    ``jaxcoag run`` box (135 bins, fragmentation) it takes the same 196 steps (3 rejected) as Kvaerno5
+    with Newton (a Jacobian per iteration), 1.32x faster (1.45 s vs 1.92 s, idle 2-core CPU), and the
+    solutions differ by 2.5e-9 of the peak (rtol 1e-6). diffrax's own choice for ESDIRK methods, one
+    Jacobian per step reused by all stages, took as many steps but was slower than Newton (2.69 s vs
+    2.57 s under load), and diffrax's VeryChord with that Jacobian once diverged on the quadratic
+    coagulation term of a 61-bin fragmentation equilibrium (> 3000 steps, 56 % rejected)."""
+
+    calculate_jacobian = diffrax.CalculateJacobian.every_stage
+
+
+def default_implicit_solver(rtol, newton_atol):
+    """The binned engine's implicit solver: :class:`Kvaerno5Stagewise` with ``optimistix.Chord``
+    (``rtol``, absolute tolerance ``newton_atol`` [g cm^-3])."""
+    return Kvaerno5Stagewise(root_finder=optx.Chord(rtol=rtol, atol=newton_atol))
+
+
 def _is_implicit(solver, fragmentation):
     """Whether ``solver`` (``Binned.solver``; None = automatic) builds a dense Jacobian (memory estimate)."""
     from .solvers import LinearlyImplicitEuler
@@ -178,10 +200,10 @@ def _solve_impl(scheme, grid, model, fragmentation, y0, t0, ts, solver, controll
     t1 = ts[-1]
     w = scheme.mass_scale(y0, grid)
     if solver is None or solver == "kvaerno5":
-        # Newton (fresh Jacobian per iteration) instead of diffrax's default chord iteration:
-        # measured 125 steps / 0 rejected vs > 3000 steps / 56 % rejected on a 61-bin
-        # fragmentation equilibrium (chord diverges on the quadratic coagulation term).
-        solver = diffrax.Kvaerno5(root_finder=optx.Newton(rtol=rtol, atol=jax.lax.stop_gradient(1e-3 * atol * M0)))
+        # a chord iteration with a fresh Jacobian per stage (Kvaerno5Stagewise): diffrax's default, one
+        # Jacobian per step (VeryChord), diverged on a 61-bin fragmentation equilibrium (> 3000 steps,
+        # 56 % rejected); Newton (a Jacobian per iteration) converges as well but costs 1.32x more
+        solver = default_implicit_solver(rtol, jax.lax.stop_gradient(1e-3 * atol * M0))
     # solvers that form Jacobians (jax.jacfwd / linearize + vmap) get the right-hand side whose
     # JVP rule is the scheme's structured Jacobian (one dense J per Jacobian instead of N + 1
     # JVPs); explicit solvers keep the plain rhs (their JVPs/VJPs need no Jacobian)
