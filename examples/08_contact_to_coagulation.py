@@ -22,9 +22,9 @@ outcome matter here (the r_g change is printed, not used).
 
 --quick: one size (8 + 8 monomers, planar), one structure, six speeds, dt = 0.112 t_c (the largest step of
 Wada et al. 2007 §4), 2000 quiet steps; the box on a 10 bins/decade grid and 1000 Monte Carlo particles
-(equal-mass grouping, Ns* = 1000) up to 100 s (minutes on 2 CPU cores, mostly compilation). Full: sizes 4, 8, 16, 32 per aggregate, 3 structures, ten
-speeds, dt = 0.014 t_c and the default end of ``collide``; 20 bins/decade and 4000 particles up to 300 s (hours
-on a laptop CPU; not run by the tests).
+(equal-mass grouping, Ns* = 1000) up to 100 s (minutes on 2 CPU cores, mostly compilation). Full: sizes 4, 8,
+16, 32 per aggregate, 3 structures, ten speeds, dt = 0.014 t_c and the default end of ``collide``; 20
+bins/decade and 4000 particles up to 300 s (hours on a laptop CPU; not run by the tests).
 
 References: Wada, Tanaka, Suyama, Kimura & Yamamoto (2007, ApJ 661, 320) §4-5 (eqs. 44-45, 48; Fig. 14);
 Dominik & Tielens (1997, ApJ 480, 647); Ormel (2008) thesis §6.5 (tabulated recipes in coagulation).

@@ -113,7 +113,7 @@ def aggregate_fits(ag):
     if "f_D_centre" in ag:
         # distances to the sphere centres. R95's "1.8 +- 0.4" / "1.7 +- 0.3" read as a value and the spread of
         # the aggregates' f_D (a weighted mean of ~100 regressions carries ~0.01, not 0.3); the plain mean over
-        # N_a >= 3 is ruled by 3-5-sphere fits (slopes up to ~20), so the median and the mean over N_a >= 10
+        # N_a >= 3 is ruled by 3-sphere fits (slopes up to 23 in model iv), so the median and the mean over N_a >= 10
         # are kept beside the weighted mean
         ok = np.isfinite(ag["f_D_centre"])
         big = ok & (ag["n_a"] >= 10)
