@@ -59,10 +59,10 @@ class Kvaerno5Stagewise(diffrax.Kvaerno5):
     calculate_jacobian = diffrax.CalculateJacobian.every_stage
 
 
-def default_implicit_solver(rtol, newton_atol):
+def default_implicit_solver(rtol, root_atol):
     """The binned engine's implicit solver: :class:`Kvaerno5Stagewise` with ``optimistix.Chord``
-    (``rtol``, absolute tolerance ``newton_atol`` [g cm^-3])."""
-    return Kvaerno5Stagewise(root_finder=optx.Chord(rtol=rtol, atol=newton_atol))
+    (``rtol``, absolute tolerance ``root_atol`` [g cm^-3])."""
+    return Kvaerno5Stagewise(root_finder=optx.Chord(rtol=rtol, atol=root_atol))
 
 
 def _is_implicit(solver, fragmentation):
