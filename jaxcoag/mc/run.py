@@ -385,8 +385,8 @@ def _inc_update(cfg, p, st_old_arrays, st, T, Tmask):
 # ----------------------------------------------------------------------------- event
 
 class _Folded(NamedTuple):
-    products: object
-    folded: jax.Array
+    products: object      # jaxcoag.outcomes.Products, counts times phi
+    folded: jax.Array     # (2,) bool: donor i, donor j emptied into the heaviest product
 
 
 def _fold_leftovers(p, prods, phi, zp, m, logm, w, z, i, j, same):
@@ -480,10 +480,10 @@ def _collide(cfg, p, st, a, b, key):
     # demagnify below); for same = True, j = i and dw_j = 0 leave the updated w[i] as it is
     w = w.at[i].set(jnp.maximum(w[i] - phi * dw_i, 0.0))
     w = w.at[j].set(jnp.maximum(w[j] - phi * dw_j, 0.0))
-    prods = _fold_leftovers(p, prods, phi, zp, m, logm, w, z, i, j, same)
-    w = w.at[i].set(jnp.where(prods.folded[0], 0.0, w[i]))
-    w = w.at[j].set(jnp.where(prods.folded[1], 0.0, w[j]))
-    prods = prods.products
+    fold = _fold_leftovers(p, prods, phi, zp, m, logm, w, z, i, j, same)
+    w = w.at[i].set(jnp.where(fold.folded[0], 0.0, w[i]))
+    w = w.at[j].set(jnp.where(fold.folded[1], 0.0, w[j]))
+    prods = fold.products   # counts already times phi, folded leftovers added
     M_tot = st.M_tot
     for idx, s_ in enumerate((i, j)):
         if cfg.leftover == "stochastic":
