@@ -125,16 +125,116 @@ def test_structured_jacobian_equals_jacfwd(case):
     if case == "coag_sweep":
         assert float(jnp.max(jnp.abs(J[:, -1]))) > 0  # the gel column (sweep) is exercised
     if case == "frag_shatter_above":
-        # jaxpr: jacfwd of rhs_structured forms J once (its (N+1)^2 scatters, direct part and
-        # FragData's, appear once each and unbatched; the tangents meet J in one matmul), while
-        # jacfwd of the plain rhs batches its scatters over the N + 1 tangents
-        n = y.shape[0]
-        data = lambda: sch.precompute(kern(), GRID, frag())
-        s_struct = _scatter_shapes(jax.jacfwd(lambda y: sch.rhs_structured(0.0, y, data())), y)
-        s_plain = _scatter_shapes(jax.jacfwd(lambda y: sch.rhs(0.0, y, data())), y)
-        assert s_struct.count((n * n,)) == 2
-        assert all(len(s) == 1 for s in s_struct)
-        assert any(len(s) == 2 and s[0] == n for s in s_plain)
+        # jaxpr: jacfwd of rhs_structured forms J once: no scatter is batched over the N + 1 tangents
+        # (the dense pair operators are built by one-off scatters in precompute; the tangents meet J
+        # in one matmul)
+        data = sch.precompute(kern(), GRID, frag())
+        assert data.op is not None and data.ejop is not None
+        s_struct = _scatter_shapes(jax.jacfwd(lambda y: sch.rhs_structured(0.0, y, data)), y)
+        s_once = (_scatter_shapes(lambda y: sch.rhs(0.0, y, data), y)
+                  + _scatter_shapes(lambda y: sch.jacobian(0.0, y, data), y))
+        assert sorted(s_struct) == sorted(s_once)
+
+
+class _ConstantDv(Constant):
+    """Constant kernel with a constant relative velocity (10 m/s), for the outcome data's index pattern."""
+
+    def relative_velocity2(self, m1, m2, x1=None, x2=None):
+        return jnp.full(jnp.broadcast_shapes(jnp.shape(m1), jnp.shape(m2)), 1e6)
+
+
+def _dense_and_scatter(sch, kern, frag, grid, y):
+    data = sch.precompute(kern(), grid, None if frag is None else frag())
+    N = grid.nbins
+    return (data, sch.rhs(0.0, y, data), sch._rhs_scatter(y[:N], data), sch.jacobian(0.0, y, data),
+            sch._jacobian_scatter(y[:N], data))
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW_CASES else c
+                                  for c in sorted(CASES)])
+def test_dense_pair_operator_equals_scatter_form(case):
+    """The dense pair operators (jaxcoag.binned.pairop) give the scatter form's right-hand side and
+    Jacobian to round-off (<= 1e-13 of the largest entry; the gel-sweep term is added by both paths
+    alike, so it is left out here), conserve mass to round-off (sum of the rhs <= 1e-13 of sum |rhs|)
+    and are used wherever the data allow (every case but the "full" OutcomeData)."""
+    sch, kern, frag = CASES[case]
+    y = _state(GRID, seed=3 + len(case))
+    N = GRID.nbins
+    data, f, f_sc, J, J_sc = jax.jit(lambda y: _dense_and_scatter(sch, kern, frag, GRID, y))(y)
+    full = case in ("outcome_full", "outcome_smooth")
+    assert (data.op is None) == full
+    if full:
+        return
+    if data.sweep is not None:  # same sweep term on both sides: compare the pair part only
+        swept = data.sweep * y[:N] * y[N]
+        f = f - jnp.concatenate([-swept, jnp.sum(swept)[None]])
+        J = J - jax.jacfwd(lambda z: jnp.concatenate([-data.sweep * z[:N] * z[N],
+                                                       jnp.sum(data.sweep * z[:N] * z[N])[None]]))(y)
+    scale = float(jnp.max(jnp.abs(f_sc)))
+    assert scale > 0
+    assert float(jnp.max(jnp.abs(f - f_sc))) <= 1e-13 * scale
+    assert abs(float(jnp.sum(f))) <= 1e-13 * float(jnp.sum(jnp.abs(f)))
+    assert float(jnp.max(jnp.abs(J - J_sc))) <= 1e-13 * float(jnp.max(jnp.abs(J_sc)))
+
+
+@pytest.mark.parametrize("bpd", [1, 3, 7, 20])
+def test_pair_categories_reproduce_every_target(bpd):
+    """pair_categories: each entry's category formula (L: iL + o, S: iS + o, F: the fixed row) gives its
+    own target, for the sticking tensors and Shattering (erosion remnants at offsets -1/0) on regular
+    grids from 1 to 20 bins per decade; the offsets run from -1 to floor(bpd log10 2) + 1, so the count
+    grows with resolution (7 at 7 bins per decade, 11 at 20) but not with the bin count."""
+    from jaxcoag.binned.pairop import MAX_CATEGORIES, pair_categories
+    from jaxcoag.binned.twobin import coagulation_tensors, pair_indices
+
+    counts = []
+    for decades in (6, 12):
+        g = MassGrid.log(1e-12, 10.0 ** (decades - 12), bpd)
+        N = g.nbins
+        iL, iS, idx, _ = coagulation_tensors(g)
+        fd = Shattering(100.0).twobin_data(_ConstantDv(1e-10), g, *pair_indices(N))
+        targets = np.concatenate([idx, np.asarray(fd.idx)], axis=1)
+        cats, code = pair_categories(targets, iL, iS, N + 1)
+        base = np.array([c[0] for c in cats])[code]
+        off = np.array([c[1] for c in cats])[code]
+        rebuilt = np.where(base == "L", iL[:, None] + off, np.where(base == "S", iS[:, None] + off, off))
+        np.testing.assert_array_equal(rebuilt, targets)
+        assert ("F", N) in cats                     # the gel accumulator is a fixed row
+        # the furthest product of a pair (2 m_i) lands floor(bpd log10 2) + 1 bins above the larger partner
+        assert max(o for b, o in cats if b == "L") == int(np.floor(bpd * np.log10(2.0))) + 1
+        assert min(o for b, o in cats if b == "L") == -1                       # eroded remnants
+        assert len(cats) <= MAX_CATEGORIES
+        counts.append(len(cats))
+    assert counts[0] == counts[1]
+
+
+def test_irregular_grid_falls_back_to_the_scatter_form(monkeypatch):
+    """A pattern with more categories than MAX_CATEGORIES keeps the scatter form (op None) and gives the
+    same right-hand side as the dense form to round-off."""
+    import jaxcoag.binned.pairop as po
+
+    sch, kern, frag = CASES["frag_shatter_above"]
+    y = _state(GRID, seed=11)
+    data_d = sch.precompute(kern(), GRID, frag())
+    monkeypatch.setattr(po, "MAX_CATEGORIES", 2)
+    data_s = sch.precompute(kern(), GRID, frag())
+    assert data_d.op is not None and data_s.op is None and data_s.ejop is None
+    f_d, f_s = sch.rhs(0.0, y, data_d), sch.rhs(0.0, y, data_s)
+    assert float(jnp.max(jnp.abs(f_d - f_s))) <= 1e-13 * float(jnp.max(jnp.abs(f_s)))
+    assert _rel(sch.jacobian(0.0, y, data_s), sch.jacobian(0.0, y, data_d)) <= 1e-13
+
+
+def test_dense_rhs_vmap_matches_loop():
+    """vmap of the dense right-hand side and Jacobian over states equals a loop (bitwise up to the
+    batched reduction order: 1e-15)."""
+    sch, kern, frag = CASES["frag_shatter_above"]
+    data = sch.precompute(kern(), GRID, frag())
+    ys = jnp.stack([_state(GRID, seed=s) for s in range(4)])
+    fv = jax.vmap(lambda y: sch.rhs(0.0, y, data))(ys)
+    Jv = jax.vmap(lambda y: sch.jacobian(0.0, y, data))(ys)
+    for k in range(4):
+        f1 = sch.rhs(0.0, ys[k], data)
+        assert float(jnp.max(jnp.abs(fv[k] - f1))) <= 1e-15 * float(jnp.max(jnp.abs(f1)))
+        assert _rel(Jv[k], sch.jacobian(0.0, ys[k], data)) <= 1e-15
 
 
 @pytest.mark.slow

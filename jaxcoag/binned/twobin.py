@@ -10,7 +10,8 @@ goes there, so sum(rho) + gel is conserved to round-off.
 Rates: pair number rate P_ij = s_ij K_ij N_i N_j over unordered pairs i >= j with s_ii = 1/2
 (the self-collision factor lives here, not in the kernel), and N_b = rho_b/m_b. Each pair
 contributes ``coef[p, :] * P`` [g cm^-3 s^-1] to the 4 bins ``idx[p, :]`` (precomputed numpy
-tensors; one ``segment_sum`` per right-hand side, no Python loops). When the product lands in
+tensors; evaluated as a few dense matrix-vector products per right-hand side, no scatters, by
+:mod:`jaxcoag.binned.pairop`, or one ``segment_sum`` on irregular grids). When the product lands in
 the larger partner's own bin (k = i, m_j << m_i), the loss of i and the gain of k are merged
 analytically (coef_i = -m_j m_i/(m_{i+1}-m_i), coef_{i+1} = m_j m_{i+1}/(m_{i+1}-m_i)) to
 avoid the catastrophic cancellation DustPy also removes.
@@ -28,7 +29,8 @@ import jax.numpy as jnp
 
 from .._validate import JaxcoagInputError
 from .grid import MassGrid
-from .redistribution import scatter_pair_jacobian
+from .pairop import PairOperator
+from .redistribution import FragData, scatter_pair_jacobian
 from .scheme import AbstractScheme
 
 __all__ = ["TwoBinScheme", "pair_indices", "coagulation_tensors", "project_callable"]
@@ -126,7 +128,9 @@ class TwoBinData(eqx.Module):
     iL: jax.Array            # (Np,) larger partner's bin (int32, from the static grid)
     iS: jax.Array            # (Np,) smaller partner's bin
     idx: jax.Array           # (Np, 4) target bins of coef (nbins = gel accumulator)
-    nbins: int = eqx.field(static=True)
+    op: object = None        # PairOperator of the sticking (+ FragData direct) terms, or None (scatter form)
+    ejop: object = None      # PairOperator of the FragData ejecta per source bin, or None
+    nbins: int = eqx.field(static=True, default=0)
 
 
 class TwoBinScheme(AbstractScheme):
@@ -177,58 +181,96 @@ class TwoBinScheme(AbstractScheme):
         fdata = None
         if fragmentation is not None:
             fdata = fragmentation.twobin_data(kernel, grid, iL, iS)
+        op, ejop = self._dense_operators(grid.nbins, iL, iS, idx, coef, khat, fdata)
         return TwoBinData(khat=khat, coef=jnp.asarray(coef), frag=fdata, sweep=sweep, iL=iL, iS=iS, idx=idx,
-                          nbins=grid.nbins)
+                          op=op, ejop=ejop, nbins=grid.nbins)
+
+    @staticmethod
+    def _dense_operators(N, iL, iS, idx, coef, khat, fdata):
+        """Dense pair operators (:mod:`jaxcoag.binned.pairop`) of the terms that are quadratic in rho with
+        coefficients fixed during a solve: sticking (weight 1 - p_f with fragmentation), the
+        :class:`~jaxcoag.binned.redistribution.FragData` losses/remnants (weight p_f) and its ejecta per
+        source bin. Returns (op, ejop); (None, None) keeps the scatter form (an irregular grid, or
+        outcome data with per-pair fragment weights in "full" mode)."""
+        coef = jnp.asarray(coef)
+        if fdata is None:
+            return PairOperator.build([(idx, coef * khat[:, None])], iL, iS, N, N + 1), None
+        if isinstance(fdata, FragData):
+            pf = fdata.p
+            op = PairOperator.build([(idx, coef * ((1.0 - pf) * khat)[:, None]),
+                                     (np.asarray(fdata.idx), fdata.coef * (pf * khat)[:, None])], iL, iS, N, N + 1)
+            ejop = PairOperator.build([(np.asarray(fdata.src)[:, None], (fdata.ejecta * pf * khat)[:, None])],
+                                      iL, iS, N, N, gel=False)
+            return (op, ejop) if (op is not None and ejop is not None) else (None, None)
+        if getattr(fdata, "full", False):
+            return None, None
+        return PairOperator.build([(idx, coef * ((1.0 - fdata.p) * khat)[:, None])], iL, iS, N, N + 1), None
 
     def rhs(self, t, y, data):
         """d(rho, gel)/dt [g cm^-3 s^-1]."""
         N = data.nbins
         rho = y[:N]
-        P = data.khat * rho[data.iL] * rho[data.iS]        # pair rates / (m_i m_j) folded in khat
-        if data.frag is None:
-            contrib = data.coef * P[:, None]
-            out = jax.ops.segment_sum(contrib.ravel(), jnp.asarray(data.idx).ravel(), num_segments=N + 1)
-        elif getattr(data.frag, "full", False):
-            # the fragmentation data describe every collision (e.g. RecipeOutcome
-            # without a mixture weight): no separate sticking part
-            out = data.frag.rhs(P, N)
+        if data.op is not None:
+            out = data.op.apply(rho)                           # dense form (jaxcoag.binned.pairop)
+            if data.ejop is not None:
+                out = out + jnp.concatenate([data.ejop.apply(rho) @ data.frag.W, jnp.zeros((1,), y.dtype)])
+            elif data.frag is not None:
+                P = data.khat * rho[data.iL] * rho[data.iS]
+                out = out + data.frag.rhs(data.frag.p * P, N)
         else:
-            pf = data.frag.p                                   # fragmenting fraction per pair
-            contrib = data.coef * ((1.0 - pf) * P)[:, None]
-            out = jax.ops.segment_sum(contrib.ravel(), jnp.asarray(data.idx).ravel(), num_segments=N + 1)
-            out = out + data.frag.rhs(pf * P, N)
+            out = self._rhs_scatter(rho, data)
         if data.sweep is not None:
             swept = data.sweep * rho * y[N]
             out = out + jnp.concatenate([-swept, jnp.sum(swept)[None]])
         return out
+
+    def _rhs_scatter(self, rho, data):
+        """Coagulation + fragmentation part of :meth:`rhs` as ``segment_sum`` scatters over the pair list
+        (the reference form; used when no dense operator applies)."""
+        N = data.nbins
+        P = data.khat * rho[data.iL] * rho[data.iS]        # pair rates / (m_i m_j) folded in khat
+        if data.frag is None:
+            contrib = data.coef * P[:, None]
+            return jax.ops.segment_sum(contrib.ravel(), jnp.asarray(data.idx).ravel(), num_segments=N + 1)
+        if getattr(data.frag, "full", False):
+            # the fragmentation data describe every collision (e.g. RecipeOutcome
+            # without a mixture weight): no separate sticking part
+            return data.frag.rhs(P, N)
+        pf = data.frag.p                                   # fragmenting fraction per pair
+        contrib = data.coef * ((1.0 - pf) * P)[:, None]
+        out = jax.ops.segment_sum(contrib.ravel(), jnp.asarray(data.idx).ravel(), num_segments=N + 1)
+        return out + data.frag.rhs(pf * P, N)
 
     def jacobian(self, t, y, data):
         """Exact dense Jacobian d rhs/d y (N+1, N+1) [s^-1] from the structure of :meth:`rhs`.
 
         The right-hand side is linear in the pair rates P_p = khat_p rho_iL rho_iS (the
         coefficients, fragmenting fractions and weights do not depend on y) plus the bilinear
-        gel-sweep term, so dP_p/d rho = khat_p (rho_iS e_iL + rho_iL e_iS) has two nonzeros and
-        J is a scatter of 2 x (coefficient columns) x Np entries
-        (:func:`~jaxcoag.binned.redistribution.scatter_pair_jacobian`) plus, with
-        fragmentation, the fragment weights' product (``data.frag.jac_rates``): O(N^2) (O(Np N)
-        with per-pair weights) work instead of N + 1 Jacobian-vector products of :meth:`rhs`.
-        Equal to ``jax.jacfwd(rhs)`` to round-off (summation order differs).
+        gel-sweep term, so dP_p/d rho = khat_p (rho_iS e_iL + rho_iL e_iS) has two nonzeros. On
+        a regular grid J is a few scaled copies of the dense category matrices
+        (:class:`~jaxcoag.binned.pairop.PairOperator`; with fragmentation plus W^T times the
+        ejecta's Jacobian); otherwise a scatter of 2 x (coefficient columns) x Np entries
+        (:func:`~jaxcoag.binned.redistribution.scatter_pair_jacobian`) plus the fragment weights'
+        product (``data.frag.jac_rates``). O(N^2) (O(N^3) for the fragment weights, O(Np N) with
+        per-pair weights) work instead of N + 1 Jacobian-vector products of :meth:`rhs`. Equal to
+        ``jax.jacfwd(rhs)`` to round-off (summation order differs).
 
         References: Brauer et al. (2008) App. A; Stammler & Birnstiel (2022) §3.2 (DustPy's
         implicit step with the coagulation Jacobian).
         """
         N = data.nbins
         rho = y[:N]
-        rL = data.khat * rho[data.iS]                      # d P_p / d rho_iL
-        rS = data.khat * rho[data.iL]                      # d P_p / d rho_iS
-        if data.frag is None:
-            J = scatter_pair_jacobian(data.idx, data.coef, rL, rS, data.iL, data.iS, N)
-        elif getattr(data.frag, "full", False):
-            J = data.frag.jac_rates(rL, rS, data.iL, data.iS, N)
+        if data.op is not None:
+            J = data.op.jacobian(rho)                                  # (N + 1, N)
+            if data.ejop is not None:
+                J = J + jnp.pad(data.frag.W.T @ data.ejop.jacobian(rho), ((0, 1), (0, 0)))
+            J = jnp.pad(J, ((0, 0), (0, 1)))                           # the gel column
+            if data.ejop is None and data.frag is not None:
+                pf = data.frag.p
+                J = J + data.frag.jac_rates(pf * data.khat * rho[data.iS], pf * data.khat * rho[data.iL],
+                                            data.iL, data.iS, N)
         else:
-            pf = data.frag.p
-            J = scatter_pair_jacobian(data.idx, data.coef, (1.0 - pf) * rL, (1.0 - pf) * rS, data.iL, data.iS, N)
-            J = J + data.frag.jac_rates(pf * rL, pf * rS, data.iL, data.iS, N)
+            J = self._jacobian_scatter(rho, data)
         if data.sweep is not None:
             # swept_b = sweep_b rho_b gel: out_b -= swept_b, out_gel += sum_b swept_b
             g = y[N]
@@ -240,6 +282,20 @@ class TwoBinScheme(AbstractScheme):
             J = J.at[N, :N].add(d_rho)
             J = J.at[N, N].add(jnp.sum(d_gel))
         return J
+
+    def _jacobian_scatter(self, rho, data):
+        """Coagulation + fragmentation part of :meth:`jacobian` as scatters over the pair list (the
+        reference form; used when no dense operator applies)."""
+        N = data.nbins
+        rL = data.khat * rho[data.iS]                      # d P_p / d rho_iL
+        rS = data.khat * rho[data.iL]                      # d P_p / d rho_iS
+        if data.frag is None:
+            return scatter_pair_jacobian(data.idx, data.coef, rL, rS, data.iL, data.iS, N)
+        if getattr(data.frag, "full", False):
+            return data.frag.jac_rates(rL, rS, data.iL, data.iS, N)
+        pf = data.frag.p
+        J = scatter_pair_jacobian(data.idx, data.coef, (1.0 - pf) * rL, (1.0 - pf) * rS, data.iL, data.iS, N)
+        return J + data.frag.jac_rates(pf * rL, pf * rS, data.iL, data.iS, N)
 
     def rhs_structured(self, t, y, data):
         """:meth:`rhs` whose forward-mode derivative in y is ``jacobian(t, y, data) @ y_dot``.
