@@ -35,7 +35,7 @@ Schema (units in brackets; "req." = required, otherwise the default is shown)::
                      width, crater_ratio = 10, chi = 1; jaxcoag.outcomes.Shattering) |
                      "to_monomers" (m_frag req. [g]; jaxcoag.outcomes.ShatterAbove)
     [solver]         binned engine: scheme = "twobin" | "dg", order = 0, method = "auto" |
-                     "kvaerno5" | "tsit5" | "linearly_implicit_euler", rtol = 1e-6, atol = 1e-10
+                     "rodas4" | "kvaerno5" | "tsit5" | "linearly_implicit_euler", rtol = 1e-6, atol = 1e-10
                      (relative to the total mass), max_steps = 100000 (per output segment)
     [mc]             Monte Carlo engine (jaxcoag.MonteCarlo): seed = 0, grouping = "none" |
                      "equal_mass" | "distribution" (default) with n_bins = 20, m_lo [g],
@@ -258,7 +258,7 @@ class FragmentationSection(_Section):
 class SolverSection(_Section):
     scheme: Literal["twobin", "dg"] = "twobin"
     order: NonNegInt = 0
-    method: Literal["auto", "kvaerno5", "tsit5", "linearly_implicit_euler"] = "auto"
+    method: Literal["auto", "rodas4", "kvaerno5", "tsit5", "linearly_implicit_euler"] = "auto"
     rtol: Pos = 1e-6
     atol: Pos = 1e-10
     max_steps: PosInt = 100_000
@@ -909,8 +909,8 @@ def initial_number(cfg: RunConfig, grid, rho_g) -> np.ndarray:
 
 def _binned_solver(cfg: RunConfig, rho_d):
     """diffrax solver of [solver] method (None = the engine's automatic choice: Tsit5 for pure growth,
-    Kvaerno5 + chord with fragmentation); rho_d [g cm^-3] is the total dust mass the root-finder
-    tolerance of an explicitly asked Kvaerno5 refers to (as the engine's own, 1e-3 atol M_tot)."""
+    Rodas4 with fragmentation); rho_d [g cm^-3] is the total dust mass the root-finder tolerance of an
+    explicitly asked Kvaerno5 (+ chord, a Jacobian per stage) refers to (1e-3 atol M_tot)."""
     import diffrax
 
     from .binned import LinearlyImplicitEuler
@@ -921,7 +921,11 @@ def _binned_solver(cfg: RunConfig, rho_d):
         return diffrax.Tsit5()
     if m == "linearly_implicit_euler":
         return LinearlyImplicitEuler()
-    if m == "kvaerno5" and not cfg.has_fragmentation:
+    if m == "rodas4":
+        from .binned import Rodas4
+
+        return Rodas4()
+    if m == "kvaerno5":
         from .binned.solve import default_implicit_solver
 
         return default_implicit_solver(so["rtol"], 1e-3 * so["atol"] * rho_d)
@@ -1008,7 +1012,7 @@ def check_memory(cfg: RunConfig):
     tensors would not fit in memory, before any array is allocated: the grid itself against
     :func:`jaxcoag.binned.grid.memory_limit_bytes` and, for the binned engine, the estimate of
     :func:`jaxcoag.binned.scheme.estimate_bytes` for [solver] scheme/order, fragmentation and an
-    implicit method ("auto" with fragmentation, "kvaerno5", "linearly_implicit_euler").
+    implicit method ("auto" with fragmentation, "rodas4", "kvaerno5", "linearly_implicit_euler").
     Returns the estimate [bytes]."""
     from .binned.grid import GRID_BYTES_PER_BIN, _gib, memory_limit_bytes
     from .binned.scheme import check_memory as _check
@@ -1023,7 +1027,7 @@ def check_memory(cfg: RunConfig):
                                 f"than the limit of {_gib(memory_limit_bytes())}; {fix}.")
     if cfg.engine != "binned":
         return nb * GRID_BYTES_PER_BIN
-    implicit = so["method"] in ("kvaerno5", "linearly_implicit_euler") or (so["method"] == "auto" and
+    implicit = so["method"] in ("rodas4", "kvaerno5", "linearly_implicit_euler") or (so["method"] == "auto" and
                                                                          cfg.has_fragmentation)
     return _check(so["scheme"], nb, order=so["order"], fragmentation=cfg.has_fragmentation, implicit=implicit,
                   fix=fix)

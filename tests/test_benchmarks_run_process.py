@@ -25,6 +25,6 @@ def test_run_process_quick_cold_then_warm(tmp_path):
     assert cold["cache_writes"] >= 50 and warm["cache_writes"] == 0 and warm["cache_hits"] >= cold["cache_writes"]
     assert warm["compile_s"] < 0.5 * cold["compile_s"]
     assert warm["steps"] == cold["steps"] and warm["m_peak_final"] == cold["m_peak_final"]
-    assert cold["solver"] == "Kvaerno5+Chord"
+    assert cold["solver"] == "Rodas4"
     # the process split adds up to the wall clock (the rest: interpreter start and exit, < 5 s)
     assert 0.0 <= warm["other_s"] < 5.0

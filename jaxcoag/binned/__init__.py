@@ -14,5 +14,6 @@ from .twobin import TwoBinScheme as TwoBinScheme
 from .engine import Binned as Binned, BinnedResult as BinnedResult
 from .solve import steady_state as steady_state, SteadyState as SteadyState
 from .solvers import LinearlyImplicitEuler as LinearlyImplicitEuler
+from .solvers import Rodas4 as Rodas4
 from .grid import monodisperse as monodisperse, mrn as mrn, exponential as exponential
 from .dg import DGScheme as DGScheme

@@ -23,6 +23,7 @@ from .._validate import JaxcoagInputError, check, is_traced
 from .grid import MassGrid, monodisperse
 from .scheme import AbstractScheme, check_memory
 from .solve import _check_controls, _is_implicit, _solve_impl, _validate_model
+from .solvers import Rodas4
 from .twobin import TwoBinScheme
 
 __all__ = ["Binned", "BinnedResult", "rebin_matrix"]
@@ -53,8 +54,9 @@ class Binned(AbstractEngine):
         scheme: the discretisation, ``TwoBinScheme()`` (default; Kovetz & Olund 1969 / Brauer et al.
             2008 two-bin split, exact mass conservation) or ``DGScheme(order=k)`` (Lombart & Laibe 2021).
         solver: a diffrax solver, or None: ``diffrax.Tsit5()`` for pure coagulation and
-            ``diffrax.Kvaerno5`` with an optimistix Newton root finder with fragmentation (stiff);
-            ``jaxcoag.binned.LinearlyImplicitEuler`` is the DustPy-parity alternative. The result
+            :class:`jaxcoag.binned.Rodas4` (Rosenbrock, order 4, L-stable) with fragmentation (stiff);
+            ``jaxcoag.binned.solve.default_implicit_solver`` (Kvaerno5, a Jacobian per stage) is the
+            previous default and ``jaxcoag.binned.LinearlyImplicitEuler`` the DustPy-parity alternative. The result
             states the one used (``BinnedResult.solver``, :meth:`solver_name`).
         stepsize_controller: diffrax controller; default ``PIDController(rtol, atol * M_tot / w)``
             (absolute tolerance relative to the total mass, per bin).
@@ -161,18 +163,18 @@ class Binned(AbstractEngine):
 
     def solver_name(self, outcome=None) -> str:
         """Name of the time integrator this engine uses with ``outcome``: "Tsit5" (pure coagulation)
-        or "Kvaerno5+Chord" (with fragmentation: Kvaerno5 with a chord iteration and a fresh Jacobian
-        per stage, ``jaxcoag.binned.solve.Kvaerno5Stagewise``) for the automatic choice, else the class
-        name of the given diffrax solver (e.g. "LinearlyImplicitEuler")."""
+        or "Rodas4" (with fragmentation: Hairer & Wanner's Rosenbrock method RODAS,
+        :class:`jaxcoag.binned.Rodas4`) for the automatic choice, else the class name of the given
+        diffrax solver (e.g. "LinearlyImplicitEuler", "Kvaerno5Stagewise")."""
         if self.solver is None:
-            return "Tsit5" if _fragmentation(outcome) is None else "Kvaerno5+Chord"
+            return "Tsit5" if _fragmentation(outcome) is None else "Rodas4"
         return type(self.solver).__name__
 
     def _advance(self, kernel, state, t_seg, outcome):
         solver = self.solver
         frag = _fragmentation(outcome)
         if solver is None:
-            solver = diffrax.Tsit5() if frag is None else "kvaerno5"  # Kvaerno5 + chord per stage, built inside
+            solver = diffrax.Tsit5() if frag is None else Rodas4()
         adjoint = diffrax.RecursiveCheckpointAdjoint() if self.adjoint is None else self.adjoint
         meter = diffrax.NoProgressMeter() if self.progress_meter is None else self.progress_meter
         t_seg = jnp.asarray(t_seg, jnp.float64)
@@ -222,7 +224,7 @@ class BinnedResult(AbstractResult):
         dt: step size [s] the solve would continue with after ``t[-1]`` (passing the result as
             ``initial`` continues from it instead of restarting from a tiny ``dt0``).
         solver: name of the time integrator used (static str): "Tsit5" (automatic, pure
-            coagulation), "Kvaerno5+Chord" (automatic, with fragmentation) or the class name of
+            coagulation), "Rodas4" (automatic, with fragmentation) or the class name of
             the diffrax solver given to ``Binned(solver=...)``.
     """
 
