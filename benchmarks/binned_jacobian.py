@@ -11,7 +11,7 @@ positive state; best of ``--repeat`` timed loops after compilation; the maximum 
 (Frobenius) difference of the Jacobians.
 
 Part 2 (solves): the default box (135 bins, 17 output times to 1e4 yr, rtol 1e-6) in one
-``jaxcoag.evolve`` call with Kvaerno5 + Newton (the default) and with the DustPy-parity
+``jaxcoag.evolve`` call with Kvaerno5 + chord (the default until 2026-11-26; now Rodas4) and with the DustPy-parity
 ``LinearlyImplicitEuler`` (PID step control, same tolerances), before (a scheme whose
 ``rhs_structured`` is the plain rhs, i.e. the previous code path: Jacobians by N + 1 JVPs) and
 after: accepted/rejected steps, wall time of the call minus compilation (``runner.CompileClock``),

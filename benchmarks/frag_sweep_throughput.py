@@ -2,7 +2,8 @@
 fragmentation sweep >= 4x the throughput of a loop).
 
 Box: the default ``jaxcoag run`` configuration (1 AU MMSN, Brownian + OC07 turbulence + radial drift, Maxwellian
-shattering, two-bin scheme on 135 bins, Kvaerno5 + Newton with the structured Jacobian, 17 outputs to 1e4 yr).
+shattering, two-bin scheme on 135 bins, the engine's implicit default (Rodas4) with the structured Jacobian, 17
+outputs to 1e4 yr).
 Members: v_frag = 6 ... 14 m/s (8 values), the ``Shattering.v_frag`` leaf of the outcome. Modes, each timed
 after its compile: ``loop`` (a Python loop of one jitted solve), ``vmap`` (one ``jax.vmap``-ed solve of all
 members). Also reports steps per member and that the vmapped members equal the looped ones.

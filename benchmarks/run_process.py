@@ -14,7 +14,7 @@ The default run (``jaxcoag config``): MMSN (Hayashi 1981) midplane at 1 AU (T = 
 Sigma_g = 1700 g cm^-2, alpha = 1e-3), 1 um grains (rho_s = 1.6), dust-to-gas 0.01, Brownian +
 Ormel & Cuzzi (2007) turbulence + radial-drift relative velocities with Ormel's Epstein/Stokes drag
 (c_s, 1/(n sigma)), Maxwellian shattering + erosion at v_frag = 10 m/s, two-bin scheme, 7 bins per
-decade up to 1e8 g (135 bins), Kvaerno5 + Newton at rtol 1e-6, 17 outputs to 1e4 yr.
+decade up to 1e8 g (135 bins), the engine's implicit default (Rodas4) at rtol 1e-6, 17 outputs to 1e4 yr.
 
 DustPy cannot run this box exactly: its Stokes number uses the thermal speed and
 1/(sqrt(2) n sigma) (St 1/1.596 of Ormel's convention at equal size, hard-wired), its kernel is

@@ -155,7 +155,8 @@ def test_below_table_is_sticking_in_monte_carlo():
 
 
 def test_below_table_is_sticking_in_binned_engine():
-    """With every pair below the table, the binned right-hand side equals pure coagulation (no outcome) exactly;
+    """With every pair below the table, the binned right-hand side equals pure coagulation (no outcome) to
+    round-off (1e-15: the outcome's data take the scatter form, pure coagulation the dense pair operators);
     at 1 km/s each pair's fragment mass is (1 - f_large) M_tot with f_large interpolated (numpy) at its own
     x_break = mu dv^2 / (2 n_k E_break), and the right-hand side still conserves mass."""
     from jaxcoag.binned.twobin import pair_indices
@@ -167,7 +168,7 @@ def test_below_table_is_sticking_in_binned_engine():
     slow = _VKernel(jnp.asarray(1e-8))      # x_break < 1e-15 for all pairs: far below the table
     r0 = rhs(slow, None)
     r1 = rhs(slow, bridge.outcome_from_collisions(_table(), ICE))
-    np.testing.assert_array_equal(np.asarray(r1), np.asarray(r0))
+    np.testing.assert_allclose(np.asarray(r1), np.asarray(r0), rtol=1e-15, atol=1e-15 * float(jnp.max(jnp.abs(r0))))
     fast = _VKernel(jnp.asarray(1e10))
     iL, iS = pair_indices(g.nbins)
     d = eqx.filter_jit(lambda k, out: out.twobin_data(k, g, iL, iS))(fast, bridge.outcome_from_collisions(_table(), ICE))

@@ -371,7 +371,8 @@ def ours_frag_box(m, *, convention="dustpy", method="ya", d2g_factor=1.0, ts_yr=
     """jaxcoag's two-bin engine on the box (grid centred on DustPy's masses ``m``).
 
     Fragmentation: ``Shattering`` with DustPy's Maxwellian probability, fragment slope, erosion
-    rule (:func:`frag_crater_ratio`) and excavated mass; Kvaerno5 + Newton. Start: all dust
+    rule (:func:`frag_crater_ratio`) and excavated mass; the engine's implicit default (Rodas4 since
+    2026-11-26; the committed frag1au results were taken with Kvaerno5 + Newton). Start: all dust
     (rho_d = dust_to_gas d2g_factor rho_g) in the monomer bin at t = 0.
 
     Returns a dict: t [s], mass_per_bin (nt, nbins) [g cm^-3], wall_s (first call, includes
@@ -395,7 +396,7 @@ def ours_frag_box(m, *, convention="dustpy", method="ya", d2g_factor=1.0, ts_yr=
         ts_yr = np.geomspace(1.0, box["t_end_yr"], 300)
     ts = np.concatenate([[0.0], np.asarray(ts_yr, dtype=np.float64) * DUSTPY_YEAR])
     with C.Timer() as tm:
-        # solver=None: Kvaerno5 + Newton, the engine's choice with fragmentation
+        # solver=None: the engine's choice with fragmentation (Rodas4)
         sol = jaxcoag.evolve(K, Binned(grid, rtol=rtol, atol=atol), n0, ts, outcome=frag)
         mass = np.asarray(sol.mass_per_bin())
     st = np.asarray(K.particles(jnp.asarray(m)).st)
@@ -403,7 +404,7 @@ def ours_frag_box(m, *, convention="dustpy", method="ya", d2g_factor=1.0, ts_yr=
                 mass_drift=float(np.max(np.abs(np.asarray(sol.mass_drift)))), St=st, kernel=K)
 
 
-def run_dustpy_frag(*, vertical="box", cfl=0.1, dv=None, box=FRAG_BOX):
+def run_dustpy_frag(*, vertical="box", cfl=0.1, dv=None, box=FRAG_BOX, snapshots_yr=None):
     """DustPy on the 1-AU fragmentation box.
 
     Set-up: 3 radial cells in [0.99, 1.01] AU (DustPy integrates only the middle one; its
@@ -422,7 +423,8 @@ def run_dustpy_frag(*, vertical="box", cfl=0.1, dv=None, box=FRAG_BOX):
     dust density dust_to_gas rho_g. "column" keeps DustPy's own vertical structure (Dubrulle
     et al. 1995 scale heights, K ~ 1/sqrt(2 pi (h_i^2 + h_j^2)), vertical settling velocity).
     ``cfl``: DustPy's step-size factor (default 0.1). ``dv``: None (DustPy's relative
-    velocities) or an (Nm, Nm) matrix [cm/s] to impose (e.g. jaxcoag's).
+    velocities) or an (Nm, Nm) matrix [cm/s] to impose (e.g. jaxcoag's). ``snapshots_yr``: DustPy's
+    snapshot times [yr] (its steps land on them; default: the end time only).
 
     Returns a dict: t [s] after every step, mass_per_bin (steps, Nm) [g cm^-2] (middle cell),
     m, St, vrel (Nm, Nm) at t = 0, gas numbers, wall_s, steps.
@@ -480,7 +482,8 @@ def run_dustpy_frag(*, vertical="box", cfl=0.1, dv=None, box=FRAG_BOX):
     sim.dust.S.coag.update()                            # fresh sources for the first step size
     sim.dust.S.tot.update()
     sim.t.cfl = cfl
-    sim.t.snapshots = np.array([box["t_end_yr"] * DUSTPY_YEAR])
+    snaps = [box["t_end_yr"]] if snapshots_yr is None else list(snapshots_yr)
+    sim.t.snapshots = np.array(snaps, dtype=np.float64) * DUSTPY_YEAR
     sim.writer = None
     gas = dict(r=float(sim.grid.r[1]), Omega=float(sim.grid.OmegaK[1]), cs=float(sim.gas.cs[1]),
                Hp=float(sim.gas.Hp[1]), rho_g=float(sim.gas.rho[1]), mfp=float(sim.gas.mfp[1]))

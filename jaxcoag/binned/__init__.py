@@ -2,10 +2,11 @@
 
 The engine object :class:`Binned` (run it with ``jaxcoag.evolve``), its result :class:`BinnedResult`,
 the grid (:class:`MassGrid`, initial distributions), the schemes (:class:`TwoBinScheme`,
-:class:`DGScheme`), the DustPy-parity solver :class:`LinearlyImplicitEuler` and :func:`steady_state`.
+:class:`DGScheme`), the Rosenbrock solver :class:`Rodas4` (the default with fragmentation), the
+DustPy-parity solver :class:`LinearlyImplicitEuler` and :func:`steady_state`.
 
 References: Smoluchowski (1916); Brauer, Dullemond & Henning (2008); Birnstiel et al. (2010);
-Stammler & Birnstiel (2022, DustPy).
+Stammler & Birnstiel (2022, DustPy); Hairer & Wanner (1996) (Rosenbrock methods).
 """
 
 from .grid import MassGrid as MassGrid
