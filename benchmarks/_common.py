@@ -246,6 +246,24 @@ class Timer:
         return False
 
 
+def first_and_best(call, repeat=2):
+    """(result, first_call_s, best_s): one compiling call of ``call()`` (blocked until ready), then the best
+    wall time of ``repeat`` more calls (inf when repeat = 0; the result is the last call's)."""
+    import jax
+
+    t0 = time.perf_counter()
+    r = call()
+    jax.block_until_ready(r)
+    first = time.perf_counter() - t0
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        r = call()
+        jax.block_until_ready(r)
+        best = min(best, time.perf_counter() - t0)
+    return r, first, best
+
+
 def _jsonable(obj):
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}

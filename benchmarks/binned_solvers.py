@@ -20,7 +20,6 @@ import argparse
 import os
 import pathlib
 import sys
-import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -38,7 +37,7 @@ from jaxcoag import runner  # noqa: E402
 from jaxcoag.binned import Rodas4  # noqa: E402
 from jaxcoag.binned.solve import default_implicit_solver  # noqa: E402
 
-from benchmarks._common import machine_info, print_table, write_json  # noqa: E402
+from benchmarks._common import first_and_best, machine_info, print_table, write_json  # noqa: E402
 
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 
@@ -47,16 +46,7 @@ def solve(b, solver, rtol, atol, repeat=2):
     eng = eqx.tree_at(lambda e: (e.solver, e.rtol, e.atol), b.engine, (solver, rtol, atol),
                       is_leaf=lambda x: x is None)
     call = lambda: jaxcoag.evolve(b.kernel, eng, b.initial, b.t_out, t0=0.0, outcome=b.outcome, throw=False)  # noqa: E731
-    t0 = time.perf_counter()
-    r = call()
-    jax.block_until_ready(r.y)
-    first = time.perf_counter() - t0
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        r = call()
-        jax.block_until_ready(r.y)
-        best = min(best, time.perf_counter() - t0)
+    r, first, best = first_and_best(call, repeat)
     return r, best, first
 
 

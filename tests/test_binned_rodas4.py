@@ -15,8 +15,9 @@ import jaxcoag
 from jaxcoag import Binned, MassGrid, evolve
 from jaxcoag.binned import Rodas4, monodisperse
 from jaxcoag.binned.solve import default_implicit_solver
-from jaxcoag.kernels import AbstractKernel
 from jaxcoag.outcomes import Shattering
+
+from _testkernels import SqrtAlphaKernel
 
 
 def _fixed(f, y0, t1, n):
@@ -57,20 +58,7 @@ def test_l_stable_one_huge_step():
     assert float(jnp.max(jnp.abs(y1))) < 2e-8
 
 
-class _Turb(AbstractKernel):
-    """Geometric cross-section x dv with dv^2 = 1 + alpha 1e10 ((m1/1e6)^2/3 + (m2/1e6)^2/3) [cgs]."""
-
-    alpha: jax.Array
-
-    def __init__(self, alpha):
-        self.alpha = jnp.asarray(alpha, float)
-
-    def relative_velocity2(self, m1, m2, x1=None, x2=None):
-        return 1.0 + self.alpha * 1e10 * ((m1 / 1e6) ** (2 / 3) + (m2 / 1e6) ** (2 / 3))
-
-    def __call__(self, m1, m2, x1=None, x2=None):
-        a1, a2 = (3 * m1 / (4 * jnp.pi)) ** (1 / 3), (3 * m2 / (4 * jnp.pi)) ** (1 / 3)
-        return jnp.pi * (a1 + a2) ** 2 * jnp.sqrt(self.relative_velocity2(m1, m2))
+_Turb = SqrtAlphaKernel  # K = pi (a1 + a2)^2 dv, dv^2 = 1 + alpha 1e10 ((m1/1e6)^(2/3) + (m2/1e6)^(2/3))
 
 
 GRID = MassGrid.log(1e-12, 1e8, 2)

@@ -27,7 +27,6 @@ Hairer & Wanner (1996) §VI.4 (RODAS).
 import argparse
 import os
 import sys
-import time
 
 import numpy as np
 
@@ -63,7 +62,6 @@ def ours_at(m, rtol, solver=None, repeat=2):
     """jaxcoag's box (DustPy conventions) at ``rtol`` (atol 1e-4 rtol relative to the total mass, the engine's
     ratio at the default rtol): mass per bin at the comparison times, steps, best wall time of ``repeat``
     calls after the compiling one."""
-    import jax
     import jaxcoag
     from jaxcoag import Binned
 
@@ -71,16 +69,7 @@ def ours_at(m, rtol, solver=None, repeat=2):
     grid, frag, n0, ts = _ours_setup(m, g)
     eng = Binned(grid, rtol=rtol, atol=1e-4 * rtol, solver=solver)
     call = lambda: jaxcoag.evolve(K, eng, n0, ts, outcome=frag)  # noqa: E731
-    t0 = time.perf_counter()
-    sol = call()
-    jax.block_until_ready(sol.y)
-    first = time.perf_counter() - t0
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        sol = call()
-        jax.block_until_ready(sol.y)
-        best = min(best, time.perf_counter() - t0)
+    sol, first, best = C.first_and_best(call, repeat)
     mass = np.asarray(sol.mass_per_bin())[1:]
     return dict(mass=mass, steps=int(sol.stats["steps"]), rejected=int(sol.stats["rejected"]), wall_s=best,
                 first_call_s=first, solver=sol.solver,

@@ -59,8 +59,7 @@ class LinearlyImplicitEuler(diffrax.AbstractAdaptiveSolver):
         del solver_state, made_jump
         h = t1 - t0
         f = lambda y: terms.vf(t0, y, args)
-        f0, jvp_fn = jax.linearize(f, y0)
-        J = jax.vmap(jvp_fn, in_axes=1, out_axes=1)(jnp.eye(y0.shape[0], dtype=y0.dtype))
+        f0, J = _jacobian(f, y0)
         A = lx.MatrixLinearOperator(jnp.eye(y0.shape[0], dtype=y0.dtype) - h * J)
         lu = lx.LU()
         lu_state = lu.init(A, {})  # one LU factorisation, reused for the error estimate
