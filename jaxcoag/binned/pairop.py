@@ -50,7 +50,8 @@ def pair_categories(targets, iL, iS, n_rows, gel=True):
     Arguments: targets (Np, C) int target rows in [0, n_rows); iL, iS (Np,) int partner bins
     (iL >= iS); n_rows: number of output rows (nbins + 1 with the gel accumulator, nbins for the
     fragment sources); gel: whether row n_rows - 1 is the gel accumulator (always a fixed row).
-    Returns: (cats, code): ``cats`` a tuple of (base, offset) with base "L", "S" or "F" (fixed row
+    Returns: (cats, code): ``cats`` a tuple of (base, offset) with base "L", "F" or "S", the S
+    categories last (fixed row
     = offset), ``code`` (Np, C) int index into ``cats``. Targets equal to the smaller partner's bin
     are (S, 0), the rest (L, target - iL), except fixed rows: the gel accumulator and any
     column whose targets are all one row. Any assignment is exact (each
@@ -59,19 +60,19 @@ def pair_categories(targets, iL, iS, n_rows, gel=True):
     t = np.asarray(targets)
     iL2 = np.broadcast_to(np.asarray(iL)[:, None], t.shape)
     iS2 = np.broadcast_to(np.asarray(iS)[:, None], t.shape)
-    base = np.where(t == iS2, 1, 0)                        # 1 = S, 0 = L
-    off = np.where(base == 1, 0, t - iL2)
+    base = np.where(t == iS2, 2, 0)                        # codes: 0 = L, 1 = F, 2 = S (sorted: S last)
+    off = np.where(base == 2, 0, t - iL2)
     # fixed rows: the gel accumulator (gel=True) and any column that always aims at one row (e.g. every
     # fragment into the monomer bin)
     isf = (t == n_rows - 1) if gel else np.zeros(t.shape, bool)
     for c in range(t.shape[1]):
         if np.unique(t[:, c]).size == 1:
             isf[:, c] = True
-    base = np.where(isf, 2, base)
+    base = np.where(isf, 1, base)
     off = np.where(isf, t, off)
     keys = np.stack([base.ravel(), off.ravel()], axis=1)
     ukeys, code = np.unique(keys, axis=0, return_inverse=True)
-    names = ("L", "S", "F")
+    names = ("L", "F", "S")
     cats = tuple((names[int(b)], int(o)) for b, o in ukeys)
     return cats, code.reshape(t.shape).astype(np.int32)
 
@@ -108,32 +109,27 @@ class PairOperator(eqx.Module):
         mats = jax.ops.segment_sum(vals.ravel(), jnp.asarray(flat), num_segments=K * N * N).reshape(K, N, N)
         return PairOperator(mats=mats, cats=cats, n_rows=n_rows)
 
-    def _groups(self):
-        rows = [k for k, (b, _) in enumerate(self.cats) if b in ("L", "F")]
-        cols = [k for k, (b, _) in enumerate(self.cats) if b == "S"]
-        return rows, cols
-
     def _contract(self, rho):
-        rows, cols = self._groups()
-        A = jnp.einsum("kij,j->ki", self.mats[np.array(rows, int)], rho) if rows else None
-        B = jnp.einsum("kij,i->kj", self.mats[np.array(cols, int)], rho) if cols else None
-        return rows, cols, A, B
+        """A = C rho for the row categories (L, F: a prefix of ``cats``), B = rho C for the S ones."""
+        nr = sum(b != "S" for b, _ in self.cats)
+        A = jnp.einsum("kij,j->ki", self.mats[:nr], rho)
+        B = jnp.einsum("kij,i->kj", self.mats[nr:], rho)
+        return nr, A, B
 
     def apply(self, rho):
         """out (n_rows,) = sum_p coef_p rho_iL rho_iS into the target rows; rho (N,)."""
-        N, R = rho.shape[0], self.n_rows
-        rows, cols, A, B = self._contract(rho)
+        R = self.n_rows
+        nr, A, B = self._contract(rho)
         out = jnp.zeros((R,), rho.dtype)
         fixed_r, fixed_v = [], []
-        for a, k in enumerate(rows):
-            base, o = self.cats[k]
+        for k, (base, o) in enumerate(self.cats):
             if base == "F":
                 fixed_r.append(o)
-                fixed_v.append(jnp.dot(rho, A[a]))
+                fixed_v.append(jnp.dot(rho, A[k]))
+            elif base == "L":
+                out = out + _shift(rho * A[k], o, R)
             else:
-                out = out + _shift(rho * A[a], o, R)
-        for a, k in enumerate(cols):
-            out = out + _shift(rho * B[a], self.cats[k][1], R)
+                out = out + _shift(rho * B[k - nr], o, R)
         if fixed_r:
             out = out.at[np.array(fixed_r)].add(jnp.stack(fixed_v))
         return out
@@ -141,21 +137,19 @@ class PairOperator(eqx.Module):
     def jacobian(self, rho):
         """d out / d rho (n_rows, N) of :meth:`apply`."""
         N, R = rho.shape[0], self.n_rows
-        rows, cols, A, B = self._contract(rho)
+        nr, A, B = self._contract(rho)
         J = jnp.zeros((R, N), rho.dtype)
         ar = np.arange(N)
-        for a, k in enumerate(rows):
-            base, o = self.cats[k]
+        for k, (base, o) in enumerate(self.cats):
             C = self.mats[k]
             if base == "F":
-                J = J.at[o].add(A[a] + jnp.einsum("ij,i->j", C, rho))
-            else:
+                J = J.at[o].add(A[k] + jnp.einsum("ij,i->j", C, rho))
+            elif base == "L":
                 J = J + _shift_rows(rho[:, None] * C, o, R)
-                J = _add_diag(J, A[a], o, R, ar)
-        for a, k in enumerate(cols):
-            o = self.cats[k][1]
-            J = J + _shift_rows((self.mats[k] * rho[None, :]).T, o, R)
-            J = _add_diag(J, B[a], o, R, ar)
+                J = _add_diag(J, A[k], o, R, ar)
+            else:
+                J = J + _shift_rows((C * rho[None, :]).T, o, R)
+                J = _add_diag(J, B[k - nr], o, R, ar)
         return J
 
 

@@ -56,7 +56,11 @@ __all__ = ["AbstractScheme", "estimate_bytes", "check_memory"]
 #   tangent;
 #   DG order 1: 2.06 cut pieces per pair (N = 57..266), ~1 kB per piece in the geometry build
 #   (Python rows) and the (k+1)^3 gain/loss tensors.
+#   the dense pair operators (jaxcoag/binned/pairop.py) add K N^2 float64 per operator (K categories,
+#   7 at 7 bins per decade; N^2 <= 2 Np): default config with fragmentation, Tsit5, 975 bins, +829 MB
+#   before them and +900 MB with them (2026-11-26), charged as 16 B x 8 categories per pair.
 _TWOBIN_PAIR = 500.0
+_TWOBIN_DENSE_PAIR = 128.0
 _TWOBIN_FRAG_PAIR = 400.0
 _JAC_PAIR_TANGENT = 100.0
 _DG_PIECES_PER_PAIR = 2.1
@@ -75,7 +79,7 @@ def estimate_bytes(scheme, nbins, *, order=0, fragmentation=False, implicit=Fals
         order: DG polynomial degree k (ignored for twobin; taken from a DGScheme instance).
         fragmentation: the fragmentation model, True, or None/False (twobin: its pair tensors and
             N x N weights; a RecipeOutcome also holds (Np, N) fragment weights).
-        implicit: an implicit solver (Kvaerno5, LinearlyImplicitEuler) builds the dense Jacobian
+        implicit: an implicit solver (Rodas4, Kvaerno5, LinearlyImplicitEuler) builds the dense Jacobian
             by forward mode: every pair tensor is carried for all len(y) tangents (O(N^3)).
 
     Returns: float bytes, or None for a scheme this model does not know.
@@ -87,7 +91,7 @@ def estimate_bytes(scheme, nbins, *, order=0, fragmentation=False, implicit=Fals
     N = float(nbins)
     pairs = 0.5 * N * (N + 1.0)
     if name in ("twobin", "TwoBinScheme"):
-        b = _TWOBIN_PAIR * pairs
+        b = (_TWOBIN_PAIR + _TWOBIN_DENSE_PAIR) * pairs
         if fragmentation is not None and fragmentation is not False:
             b += _TWOBIN_FRAG_PAIR * pairs + 8.0 * N * N
             if type(fragmentation).__name__ == "RecipeOutcome":

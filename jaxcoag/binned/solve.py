@@ -14,7 +14,7 @@ Time-integration defaults (docs/design_notes.md, traps measured):
   ``default_implicit_solver`` (Kvaerno5 + chord, a Jacobian per stage; diffrax's own chord with one
   Jacobian per step rejected most steps near equilibrium) is the previous default and
   ``LinearlyImplicitEuler`` (jaxcoag.binned.solvers) the DustPy-parity alternative (one Jacobian + LU per step);
-* implicit solvers (Kvaerno5's Newton, ``LinearlyImplicitEuler``) and :func:`steady_state` get
+* implicit solvers (Rodas4, Kvaerno5's root finder, ``LinearlyImplicitEuler``) and :func:`steady_state` get
   ``scheme.rhs_structured``: for the two-bin scheme a ``custom_jvp`` whose rule is the structured
   Jacobian (``TwoBinScheme.jacobian``, formed once per Jacobian; ~80x cheaper than N + 1 JVPs
   at 135 bins with fragmentation, benchmarks/binned_jacobian.py); explicit solvers keep ``rhs``;
@@ -51,7 +51,8 @@ class Kvaerno5Stagewise(diffrax.Kvaerno5):
     (``diffrax.CalculateJacobian.every_stage``) for a chord root finder: one Jacobian and one LU per
     stage, reused over that stage's iterations.
 
-    The default implicit solver of the binned engine, with ``optimistix.Chord``. On the default
+    The binned engine's default implicit solver (with ``optimistix.Chord``) before :class:`Rodas4`;
+    ``[solver] method = "kvaerno5"`` / :func:`default_implicit_solver`. On the default
     ``jaxcoag run`` box (135 bins, fragmentation) it takes the same 196 steps (3 rejected) as Kvaerno5
     with Newton (a Jacobian per iteration), 1.32x faster (1.45 s vs 1.92 s, idle 2-core CPU), and the
     solutions differ by 2.5e-9 of the peak (rtol 1e-6). diffrax's own choice for ESDIRK methods, one
@@ -75,8 +76,6 @@ def _is_implicit(solver, fragmentation):
 
     if solver is None:
         return fragmentation is not None  # Rodas4 with fragmentation
-    if isinstance(solver, str):
-        return solver == "kvaerno5"
     return isinstance(solver, (diffrax.AbstractImplicitSolver, LinearlyImplicitEuler, Rodas4))
 
 
@@ -203,11 +202,6 @@ def _solve_impl(scheme, grid, model, fragmentation, y0, t0, ts, solver, controll
     data = scheme.precompute(model, grid, fragmentation)
     t1 = ts[-1]
     w = scheme.mass_scale(y0, grid)
-    if solver is None or solver == "kvaerno5":
-        # a chord iteration with a fresh Jacobian per stage (Kvaerno5Stagewise): diffrax's default, one
-        # Jacobian per step (VeryChord), diverged on a 61-bin fragmentation equilibrium (> 3000 steps,
-        # 56 % rejected); Newton (a Jacobian per iteration) converges as well but costs 1.32x more
-        solver = default_implicit_solver(rtol, jax.lax.stop_gradient(1e-3 * atol * M0))
     # solvers that form Jacobians (jax.jacfwd / linearize + vmap) get the right-hand side whose
     # JVP rule is the scheme's structured Jacobian (one dense J per Jacobian instead of N + 1
     # JVPs); explicit solvers keep the plain rhs (their JVPs/VJPs need no Jacobian)
