@@ -107,8 +107,9 @@ def test_result_analysis_matches_numpy(run8):
     r = run8
     st = r.final_state.dem
     N = 16
-    part, act = np.asarray(st.partner), np.asarray(st.active)
-    edges = [(i, int(part[i, k])) for i in range(N) for k in range(part.shape[1]) if act[i, k]]
+    ci, cj, act = np.asarray(st.ci), np.asarray(st.cj), np.asarray(st.active)
+    edges = [(int(i), int(j)) for i, j, a in zip(ci, cj, act) if a]
+    assert all(i < j < N for i, j in edges) and len(set(edges)) == len(edges)  # each pair once, ci < cj
     # connected components by repeated relabelling (independent of the jitted pointer jumping)
     lab = np.arange(N)
     for _ in range(N):
@@ -278,9 +279,10 @@ def test_flags_map_to_the_shared_status_codes():
 
 @pytest.mark.slow
 def test_capacity_overflow_during_the_run_is_a_status():
-    """Monomer 0 owns its bond to 1 (capacity 1); the incoming monomer 2 hits monomer 0: no slot is left."""
+    """A triangle of 3 bonded monomers and an incoming monomer aimed at the middle of its front edge: capacity 1
+    gives 4 contact slots, the 3 bonds and the 2 new contacts need 5."""
     d = 2 * R1 - float(MAT.delta0)
-    a = contact.Aggregate(jnp.array([[0.0, 0.0], [-d, 0.0]]), R1)  # monomer 0 in front (+x)
+    a = contact.Aggregate(jnp.array([[0.0, d / 2], [0.0, -d / 2], [-d * np.sqrt(3) / 2, 0.0]]), R1)  # edge at +x
     b = contact.monomer(2)
     with pytest.warns(RuntimeWarning, match="capacity_exceeded"):
         r = contact.collide(a, b, 2.5 * V0, MAT, capacity=1, t_end=200 * TC, throw=False)

@@ -7,7 +7,7 @@ A differentiable discrete-element model (DEM) of equal spherical monomers, in 2-
   (Wada et al. 2007 Table 2) and ``material(...)``, and the derived scales (v0, t_c, E_roll, E_break, ...);
 * :mod:`~.jkr`, :mod:`~.interactions`: the JKR normal force (eqs. 1-7) and the sliding, rolling and twisting springs
   with their inelastic regimes (eqs. 8-43), pure functions;
-* :mod:`~.dem`: the fixed-capacity state, neighbour list, contact table and leapfrog step (eqs. 46-47);
+* :mod:`~.dem`: the fixed-capacity state, neighbour list, contact list and leapfrog step (eqs. 46-47);
 * :func:`bcca` (:mod:`~.structures`): ballistic cluster-cluster aggregates of 2^k monomers;
 * :func:`collide` / :class:`DEM` + :class:`Collision` (:mod:`~.collision`): a collision run to its outcome, also as
   an engine of ``jaxcoag.evolve`` (checkpoint/resume), returning a :class:`CollisionResult`;

@@ -10,9 +10,8 @@
   law is N = 1.37 (r_g/r1)^1.57).
 
 Contact graphs are given as an (E, 2) integer array of monomer index pairs plus an optional (E,) boolean ``active``
-mask; pairs with an index outside [0, n) are ignored (the DEM's empty-slot sentinel is n). The owner-row contact
-table of :mod:`jaxcoag.aggregates.contact.dem` ((N, K) ``partner``/``active``) flattens to this form:
-``edges = stack([repeat(arange(N), K), partner.ravel()], -1)``, ``active = active.ravel()``.
+mask; pairs with an index outside [0, n) are ignored (the DEM's empty-slot sentinel is n). The contact list of
+:mod:`jaxcoag.aggregates.contact.dem` is of this form: ``edges = stack([ci, cj], -1)`` with its ``active``.
 
 Discrete outputs (labels, sizes) carry no gradient; r_g is differentiable in the positions (and safe at r_g = 0).
 

@@ -203,7 +203,8 @@ class DEM(AbstractEngine):
 
     Fields:
         dt: time step [s]; None: 0.014 t_c of the material (Wada et al. 2007 §4). Refused above 0.2 t_c.
-        capacity: contact slots per monomer (static; default 6 in 2-D, 12 in 3-D).
+        capacity: contact slots per monomer (static; the contact list holds capacity x N contacts; default 2 in
+            2-D, 3 in 3-D).
         neighbours: Verlet-list slots per monomer (static; default 8 in 2-D, 16 in 3-D).
         skin: Verlet skin in units of r1 (default 0.1).
         inelastic: static; inelastic sliding, rolling and twisting (eqs. 39-43). False: elastic springs only.
@@ -271,7 +272,7 @@ class DEM(AbstractEngine):
             if not isinstance(st, _CollisionState):
                 raise JaxcoagInputError("initial is a CollisionResult without final_state; continue a result returned "
                                         "by jaxcoag.evolve or contact.collide.")
-            K = st.dem.partner.shape[-1]
+            K = st.dem.ci.shape[-1] // st.dem.x.shape[-2]
             if self.capacity is not None and int(self.capacity) != K:
                 raise JaxcoagInputError(f"the continued run has capacity {K}; use DEM(capacity={K}) or None.")
             return
@@ -287,22 +288,21 @@ class DEM(AbstractEngine):
             self._check_capacity(kernel, initial)
 
     def _check_capacity(self, mat, coll):
-        """Refuse capacities that cannot hold the initial contacts of either aggregate."""
+        """Refuse capacities whose contact list (capacity x N slots) cannot hold the initial contacts."""
         from scipy.spatial import cKDTree
 
         K = int(self.capacity or _dem.default_capacity(coll.dim))
         r1 = float(mat.r1)
+        n_tot, have = 0, 0
         for name in ("a", "b"):
             x = np.asarray(getattr(coll, name).positions, np.float64)
-            if x.shape[0] < 2:
-                continue
-            pairs = cKDTree(x).query_pairs(2.0 * r1, output_type="ndarray")
-            if len(pairs):
-                lo = np.minimum(pairs[:, 0], pairs[:, 1])
-                need = int(np.bincount(lo).max())
-                if need > K:
-                    raise JaxcoagInputError(f"DEM(capacity={K}) contact slots cannot hold the initial contacts of "
-                                            f"aggregate {name} (a monomer owns {need}); give capacity >= {need}.")
+            n_tot += x.shape[0]
+            if x.shape[0] >= 2:
+                have += len(cKDTree(x).query_pairs(2.0 * r1, output_type="ndarray"))
+        if have > K * n_tot:
+            need = -(-have // n_tot)
+            raise JaxcoagInputError(f"DEM(capacity={K}) contact slots per monomer ({K * n_tot} in all) cannot hold the "
+                                    f"{have} initial contacts of the two aggregates; give capacity >= {need}.")
 
     def _init(self, kernel, initial, t0, outcome, key):
         if isinstance(initial, CollisionResult):
@@ -343,9 +343,8 @@ class DEM(AbstractEngine):
         x, v = st.x[:, :dim], st.v[:, :dim]
         from .analysis import largest_cluster
 
-        N, K = st.partner.shape
-        edges = jnp.stack([jnp.repeat(jnp.arange(N), K), st.partner.reshape(-1)], axis=-1)
-        lc = largest_cluster(st.x, edges, st.active.reshape(-1))
+        edges = jnp.stack([st.ci, st.cj], axis=-1)
+        lc = largest_cluster(st.x, edges, st.active)
         labels, sizes, r_g, n_con = lc.labels, lc.sizes, lc.r_g, lc.n_con
         return CollisionResult(
             t=jnp.asarray(t, jnp.float64), status=status, E_kin=outs["E_kin"], E_kin_rot=outs["E_kin_rot"], U=outs["U"],
@@ -364,11 +363,11 @@ def _warn_flags(flags):
 def _capacity_message(flags):
     what = []
     if flags & _dem.FLAG_CONTACTS:
-        what.append("the contact table (raise DEM(capacity=...) / collide(capacity=...))")
+        what.append("the contact list (raise DEM(capacity=...) / collide(capacity=...))")
     if flags & _dem.FLAG_NEIGHBOURS:
         what.append("the neighbour list or a cell of the cell list (raise DEM(neighbours=...) / "
                     "collide(neighbours=...); monomers are much closer than 2 r1)")
-    return ("DEM run stopped with status capacity_exceeded: a monomer needed more slots than " + " and ".join(what)
+    return ("DEM run stopped with status capacity_exceeded: the run needed more slots than " + " and ".join(what)
             + "; the state after the overflow is the last one recorded.")
 
 

@@ -10,10 +10,13 @@ State (:class:`DEMState`, fixed capacity, every field an array so that it checkp
 * positions ``x``, velocities ``v``, angular velocities ``w`` (N, 3) [cm, cm/s, rad/s] and the force ``F`` [dyn] and
   torque ``M`` [dyn cm] of the current configuration; planar (2-D) runs keep z = 0 and w parallel to z by the
   symmetry of the forces (nothing is projected);
-* an owner-row contact table (C-layout of the spec, Part C): particle i owns its contacts with partners j > i in
-  ``partner[i, k]`` (k < K, K = 6 in 2-D and 12 in 3-D, the largest coordination of equal spheres) with the
-  space-frame contact pointers ``n_i``, ``n_j`` (unit vectors fixed in the bodies, Wada et al. 2007 eqs. 28-29,
-  rotated exactly at each drift) and the twisting angle ``phi`` (eq. 24: phi = phi_s n_c);
+* a flat contact list (C-layout of the spec, Part C) of C = capacity x N slots: slot k holds the pair
+  ``ci[k] < cj[k]`` (``active[k]``) with the space-frame contact pointers ``n_i``, ``n_j`` (unit vectors fixed in
+  the bodies, Wada et al. 2007 eqs. 28-29, rotated exactly at each drift) and the twisting angle ``phi`` (eq. 24:
+  phi = phi_s n_c); new contacts take the lowest free slots. Every per-contact pass is O(C) = O(N): a monomer
+  aggregate has about one contact per monomer, so a list of 2 (2-D) or 3 (3-D) slots per monomer is 3-4x
+  shorter than a table of the largest coordination per monomer (6 / 12 slots, the layout before), and that
+  length is what a step costs (docs/design_notes.md, "DEM contact layout");
 * a Verlet neighbour list ``nbr`` (N, K_nb) of partners j > i within 2 r1 + skin (skin = 0.1 r1 by default),
   rebuilt inside ``lax.cond`` when a monomer has moved more than skin/2 since the last build (under ``jax.vmap``
   the branch runs when any member needs it and is selected per member, so it stays a branch); the build is a
@@ -107,7 +110,7 @@ from .interactions import (_dot, _norm, clip_inelastic, contact_forces, contact_
 __all__ = ["DEMState", "init_state", "step", "integrate", "integrate_until", "diagnostics", "flags_code",
            "FLAG_CONTACTS", "FLAG_NEIGHBOURS", "FLAG_NONFINITE", "default_capacity", "default_neighbours"]
 
-#: ``DEMState.flags`` bit: a monomer needed more contact slots than the capacity K.
+#: ``DEMState.flags`` bit: the contact list (capacity x N slots) was full.
 FLAG_CONTACTS = 1
 #: ``DEMState.flags`` bit: a neighbour-list row or a cell of the cell list was full (pairs may be missed).
 FLAG_NEIGHBOURS = 2
@@ -116,8 +119,12 @@ FLAG_NONFINITE = 4
 
 
 def default_capacity(dim: int) -> int:
-    """Contact slots per monomer: the largest coordination of equal spheres, 6 in 2-D and 12 in 3-D."""
-    return 6 if dim == 2 else 12
+    """Contact slots per monomer (the list holds capacity x N contacts): 2 in 2-D and 3 in 3-D.
+
+    A ballistic aggregate has N - 1 contacts (one per monomer); the densest packings of equal spheres hold 3
+    (2-D, hexagonal) and 6 (3-D, fcc) contacts per monomer, random close packing ~3 (coordination ~6). A run
+    that needs more stops with status ``capacity_exceeded`` (raise ``capacity``)."""
+    return 2 if dim == 2 else 3
 
 
 def default_neighbours(dim: int) -> int:
@@ -137,23 +144,23 @@ class DEMState(eqx.Module):
     Fields:
         x, v, w: (N, 3) positions [cm], velocities [cm s^-1], angular velocities [rad s^-1].
         F, M: (N, 3) total contact force [dyn] and torque [dyn cm] at ``x`` (for the next half kick).
-        partner: (N, K) int32 contact partner j > i of owner i (N = empty slot).
-        active: (N, K) bool, slot holds a contact.
-        n_i, n_j: (N, K, 3) contact pointers of the owner and the partner (unit vectors, space frame).
-        phi: (N, K) twisting angle phi_s [rad] (Wada et al. 2007 eq. 24).
+        ci, cj: (C,) int32 the two monomers of each contact slot, ci < cj (N = empty slot); C = capacity x N.
+        active: (C,) bool, slot holds a contact.
+        n_i, n_j: (C, 3) contact pointers of monomers ci and cj (unit vectors, space frame).
+        phi: (C,) twisting angle phi_s [rad] (Wada et al. 2007 eq. 24).
         nbr: (N, K_nb) int32 Verlet neighbours j > i of i (N = empty).
         x_ref: (N, 3) positions at the last neighbour-list build [cm].
         U: (4,) potential energies (U_n, U_s, U_r, U_t) of all contacts at ``x`` [erg].
-        Uc: (N, K, 4) energies (U_n, U_s, U_r, U_t) of each contact at ``x`` [erg] (booked as dissipated when
+        Uc: (C, 4) energies (U_n, U_s, U_r, U_t) of each contact at ``x`` [erg] (booked as dissipated when
             the contact breaks in the next step).
-        Fc, Mc1, Mc2: (N, K, 3) force on the owner [dyn] and torques on owner and partner [dyn cm] of each
-            contact at ``x`` (for the work of a contact that breaks in the next step).
+        Fc, Mc1, Mc2: (C, 3) force on monomer ci [dyn] and torques on ci and cj [dyn cm] of each contact at ``x``
+            (for the work of a contact that breaks in the next step).
         E_dis: (4,) dissipated energies (normal, sliding, rolling, twisting) since the start [erg].
         Fe: (N, 3) event-time correction at ``x`` [dyn]: the correction impulses due at this configuration over dt
             (module docstring, "Event times"), applied with ``F`` in the two half kicks around ``x``.
-        ev_f, ev_p: (N, 2K) correction due at the next configuration, per slot (breakings, then creations): the
-            normal force on the owner [dyn] (impulse over dt, along n_c of that configuration) and the partner
-            (N = none).
+        ev_f, ev_i, ev_j: (2C,) correction due at the next configuration, per slot (breakings, then creations): the
+            normal force on monomer ev_i [dyn] (impulse over dt, along n_c of that configuration; -ev_f on ev_j)
+            and the pair (N = none).
         axes: (dim,) bool, its length is the dimension of the run (2: planar, 3) and so a static shape.
         step: int64, steps taken since the start; t = t0 + step dt.
         t0: float64, time of the start [s].
@@ -169,7 +176,8 @@ class DEMState(eqx.Module):
     w: jax.Array
     F: jax.Array
     M: jax.Array
-    partner: jax.Array
+    ci: jax.Array
+    cj: jax.Array
     active: jax.Array
     n_i: jax.Array
     n_j: jax.Array
@@ -184,7 +192,8 @@ class DEMState(eqx.Module):
     E_dis: jax.Array
     Fe: jax.Array
     ev_f: jax.Array
-    ev_p: jax.Array
+    ev_i: jax.Array
+    ev_j: jax.Array
     axes: jax.Array
     step: jax.Array
     t0: jax.Array
@@ -255,13 +264,13 @@ def _gather(a, idx):
     return a[jnp.minimum(idx, a.shape[0] - 1)]
 
 
-def _safe_pairs(x, partner, active, r1):
-    """Positions of the pair ends (N, K, 3): the partner's, or a dummy at distance 2 r1 along x for empty slots
-    (finite contact geometry there, so that NaN never enters a masked lane or its gradient)."""
-    xi = jnp.broadcast_to(x[:, None, :], partner.shape + (3,))
-    xj = _gather(x, partner)
-    dummy = xi - 2.0 * r1 * jnp.array([[[1.0, 0.0, 0.0]]])
-    return xi, jnp.where(active[..., None], xj, dummy)
+def _safe_pairs(x, ci, cj, active, r1):
+    """Positions of the pair ends (C, 3) of the slots (ci, cj): monomer cj's, or a dummy at distance 2 r1 along x
+    from monomer ci for empty slots (finite contact geometry there, so that NaN never enters a masked lane or its
+    gradient)."""
+    xi = _gather(x, ci)
+    dummy = xi - 2.0 * r1 * jnp.array([[1.0, 0.0, 0.0]])
+    return xi, jnp.where(active[..., None], _gather(x, cj), dummy)
 
 
 def _unit(d):
@@ -279,56 +288,34 @@ def _safe_pointers(n_i, n_j, phi, active):
     return jnp.where(a, n_i, -ex), jnp.where(a, n_j, ex), jnp.where(active, phi, 0.0)
 
 
-def _contact_buffer(n_slots: int) -> int:
-    """Static number of contact slots that the compacted force evaluation handles (1/3 of the table, >= 32; a
-    monomer aggregate has about one contact per monomer, K = 6 or 12 slots, so the full table is the fallback)."""
-    return min(n_slots, max(32, n_slots // 3))
+def _pair_sum(f_i, f_j, ci, cj, active, N):
+    """Per-monomer sums (N, k) of per-slot values: f_i (C, k) on monomer ci and f_j (C, k) on cj (one scatter)."""
+    ids = jnp.concatenate([jnp.where(active, ci, N), jnp.where(active, cj, N)])
+    return jax.ops.segment_sum(jnp.concatenate([f_i, f_j], axis=0), ids, num_segments=N + 1)[:N]
 
 
-def _evaluate(x, partner, active, n_i, n_j, phi, mat):
+def _evaluate(x, ci, cj, active, n_i, n_j, phi, mat):
     """Force [dyn] and torque [dyn cm] on every monomer, the four potential energies (U_n, U_s, U_r, U_t) [erg]
-    summed over the contacts, and per contact slot (zero where empty): the energies (N, K, 4) [erg], the force on
-    the owner (N, K, 3) [dyn] and the torques on owner and partner (N, K, 3) [dyn cm]. The occupied slots are
-    gathered into a buffer of :func:`_contact_buffer` slots when they fit (else the whole table is evaluated)."""
-    N, K = partner.shape
-    L = N * K
-    nbuf = _contact_buffer(L)
-    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    summed over the contacts, and per contact slot (zero where empty): the energies (C, 4) [erg], the force on
+    monomer ci (C, 3) [dyn] and the torques on ci and cj (C, 3) [dyn cm]."""
+    N = x.shape[0]
+    xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
     ni, nj, ph = _safe_pointers(n_i, n_j, phi, active)
-
-    def per_slot(cf):
-        return cf.F1, cf.M1, cf.M2, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1)
-
-    def full(_):
-        return per_slot(contact_forces(xi, xj, ni, nj, ph, mat))
-
-    def compact(_):
-        # only the occupied slots (typically ~1/K of the table) are evaluated, then scattered back
-        idx = jnp.nonzero(active.reshape(L), size=nbuf, fill_value=L)[0]
-        take = lambda a: a.reshape((L,) + a.shape[2:])[jnp.minimum(idx, L - 1)]  # noqa: E731
-        out = per_slot(contact_forces(take(xi), take(xj), take(ni), take(nj), take(ph), mat))
-        return tuple(jnp.zeros((L,) + o.shape[1:]).at[idx].set(o, mode="drop").reshape((N, K) + o.shape[1:])
-                     for o in out)
-
-    F1, M1, M2, Uc = jax.lax.switch(_max_member((jnp.sum(active) > nbuf).astype(jnp.int32)), (compact, full), None)
+    cf = contact_forces(xi, xj, ni, nj, ph, mat)
     a = active[..., None]
-    F1 = jnp.where(a, F1, 0.0)
-    M1 = jnp.where(a, M1, 0.0)
-    M2 = jnp.where(a, M2, 0.0)
-    ids = jnp.where(active, partner, N).reshape(-1)
-    F = jnp.sum(F1, axis=1) + jax.ops.segment_sum(-F1.reshape(-1, 3), ids, num_segments=N + 1)[:N]
-    M = jnp.sum(M1, axis=1) + jax.ops.segment_sum(M2.reshape(-1, 3), ids, num_segments=N + 1)[:N]
-    Uc = jnp.where(a, Uc, 0.0)
-    return F, M, jnp.sum(Uc, axis=(0, 1)), Uc, F1, M1, M2
+    F1 = jnp.where(a, cf.F1, 0.0)
+    M1 = jnp.where(a, cf.M1, 0.0)
+    M2 = jnp.where(a, cf.M2, 0.0)
+    Uc = jnp.where(a, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1), 0.0)
+    FM = _pair_sum(jnp.concatenate([F1, M1], axis=-1), jnp.concatenate([-F1, M2], axis=-1), ci, cj, active, N)
+    return FM[:, :3], FM[:, 3:], jnp.sum(Uc, axis=0), Uc, F1, M1, M2
 
 
-def _work(Fc, Mc1, Mc2, partner, dx, dth):
+def _work(Fc, Mc1, Mc2, ci, cj, dx, dth):
     """Half the work of each contact's force and torques over a step, (1/2) [F.(dx_i - dx_j) + M_1.dth_i +
-    M_2.dth_j] [erg] (N, K): the leapfrog's half kick with a contact that exists at only one end of the step."""
-    N = dx.shape[0]
-    dxi = jnp.broadcast_to(dx[:, None, :], Fc.shape)
-    dti = jnp.broadcast_to(dth[:, None, :], Fc.shape)
-    return 0.5 * (_dot(Fc, dxi - _gather(dx, partner)) + _dot(Mc1, dti) + _dot(Mc2, _gather(dth, partner)))
+    M_2.dth_j] [erg] (C,): the leapfrog's half kick with a contact that exists at only one end of the step."""
+    return 0.5 * (_dot(Fc, _gather(dx, ci) - _gather(dx, cj)) + _dot(Mc1, _gather(dth, ci))
+                  + _dot(Mc2, _gather(dth, cj)))
 
 
 # ------------------------------------------------------------------------------------------------- neighbours
@@ -379,47 +366,51 @@ def _build_neighbours(x, cutoff, n_nb, dim):
 
 
 # ------------------------------------------------------------------------------------------------- contacts
-def _create(x, partner, active, n_i, n_j, phi, nbr, mat):
+def _create(x, ci, cj, active, n_i, n_j, phi, nbr, mat):
     """New contacts for the neighbour pairs with delta >= 0 not yet in contact (Wada et al. 2007 §2.1).
 
-    Slots are assigned within each owner row (ranks of the candidates matched to ranks of the free slots, so no
-    two rows write the same place). Pointers n_i = -n_c, n_j = +n_c (n_c = (x_i - x_j)/|x_i - x_j|), phi = 0.
-    Returns the updated table, the mask of new contacts (N, K) (the caller books E_dis,n += -U_n(delta) of each,
-    the jump of U_n from 0 to its JKR value, from the force evaluation at the same positions) and an overflow
-    flag (more candidates than free slots).
+    Whether a neighbour pair is already a contact is looked up in the sorted keys ci N + cj of the active slots;
+    the r-th new contact (in the order of the neighbour list) takes the r-th free slot. Pointers n_i = -n_c,
+    n_j = +n_c (n_c = (x_i - x_j)/|x_i - x_j|), phi = 0. Returns the updated list, the mask of new contacts (C,)
+    (the caller books E_dis,n += -U_n(delta) of each, the jump of U_n from 0 to its JKR value, from the force
+    evaluation at the same positions) and an overflow flag (more new contacts than free slots).
     """
-    N, K = partner.shape
+    N, Kn = nbr.shape
+    C = ci.shape[0]
     valid = nbr < N
     xn = _gather(x, nbr)
     nc, dist = _unit(jnp.broadcast_to(x[:, None, :], xn.shape) - xn)
     delta = 2.0 * mat.r1 - dist
-    already = jnp.any((partner[:, None, :] == nbr[:, :, None]) & active[:, None, :], axis=-1)
-    cand = valid & (delta >= 0) & ~already
-    free = ~active
-    crank = jnp.cumsum(cand, axis=1) - 1
-    frank = jnp.cumsum(free, axis=1) - 1
-    overflow = jnp.any(jnp.sum(cand, axis=1) > jnp.sum(free, axis=1))
-    match = free[:, :, None] & cand[:, None, :] & (frank[:, :, None] == crank[:, None, :])  # (N, K, K_nb)
-    new = jnp.any(match, axis=-1)
-    mf = match.astype(x.dtype)
-    new_partner = jnp.sum(jnp.where(match, nbr[:, None, :], 0), axis=-1).astype(partner.dtype)
-    new_nc = jnp.sum(mf[..., None] * nc[:, None, :, :], axis=2)
-    a = new[..., None]
-    partner = jnp.where(new, new_partner, partner)
-    n_i = jnp.where(a, -new_nc, n_i)
-    n_j = jnp.where(a, new_nc, n_j)
+    n64 = jnp.int64(N)
+    keys = jnp.sort(jnp.where(active, ci.astype(jnp.int64) * n64 + cj, n64 * n64))
+    ckey = (jnp.arange(N, dtype=jnp.int64)[:, None] * n64 + nbr).reshape(-1)
+    pos = jnp.searchsorted(keys, ckey)
+    already = (keys[jnp.minimum(pos, C - 1)] == ckey).reshape(N, Kn)
+    cand = (valid & (delta >= 0) & ~already).reshape(-1)
+    crank = jnp.cumsum(cand) - 1
+    free = jnp.nonzero(~active, size=C, fill_value=C)[0]
+    n_free = jnp.sum(~active)
+    overflow = jnp.sum(cand) > n_free
+    slot = jnp.where(cand & (crank < n_free), free[jnp.clip(crank, 0, C - 1)], C)
+    ii = jnp.repeat(jnp.arange(N, dtype=ci.dtype), Kn)
+    ncf = nc.reshape(-1, 3)
+    ci = ci.at[slot].set(ii, mode="drop")
+    cj = cj.at[slot].set(nbr.reshape(-1).astype(cj.dtype), mode="drop")
+    new = jnp.zeros((C,), bool).at[slot].set(True, mode="drop")
+    n_i = n_i.at[slot].set(-ncf, mode="drop")
+    n_j = n_j.at[slot].set(ncf, mode="drop")
     phi = jnp.where(new, 0.0, phi)
-    return partner, active | new, n_i, n_j, phi, new, overflow
+    return ci, cj, active | new, n_i, n_j, phi, new, overflow
 
 
-def _break(x, partner, active, mat):
-    """Break the contacts with delta < -delta_c (Wada et al. 2007 §2.1). Returns (partner, active, broken mask)."""
+def _break(x, ci, cj, active, mat):
+    """Break the contacts with delta < -delta_c (Wada et al. 2007 §2.1). Returns (ci, cj, active, broken mask)."""
     N = x.shape[0]
-    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
     _, dist = _unit(xi - xj)
     broken = active & (2.0 * mat.r1 - dist < -mat.delta_c)
     active = active & ~broken
-    return jnp.where(active, partner, N), active, broken
+    return jnp.where(active, ci, N), jnp.where(active, cj, N), active, broken
 
 
 # JKR normal force at the two events in units of F_c (Wada et al. 2007 eq. 5; ``jkr.normal_force``): F(0) at a/a_0 =
@@ -445,15 +436,15 @@ def _hurwitz_zeta_m_half(a):
             - (105.0 / (32.0 * 42.0 * 720.0)) * b**-4.5)
 
 
-def _compression(x, partner, mask, r1):
-    """delta = 2 r1 - |x_i - x_j| [cm] of the slots (owner i, ``partner``), the dummy value 0 where ``mask`` is
-    False (finite, with a finite gradient)."""
-    xi, xj = _safe_pairs(x, partner, mask, r1)
+def _compression(x, ci, cj, mask, r1):
+    """delta = 2 r1 - |x_i - x_j| [cm] of the slots (ci, cj), the dummy value 0 where ``mask`` is False (finite,
+    with a finite gradient)."""
+    xi, xj = _safe_pairs(x, ci, cj, mask, r1)
     _, dist = _unit(xi - xj)
     return 2.0 * r1 - dist
 
 
-def _event_impulses(x_old, x, partner_old, broken, partner, new, ev_f, ev_p, mat):
+def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, ev_j, mat):
     """Event-time correction of the leapfrog (module docstring, "Event times").
 
     A contact created in this step (``new``, delta crossed 0) or broken (``broken``, delta crossed -delta_c)
@@ -463,16 +454,16 @@ def _event_impulses(x_old, x, partner_old, broken, partner, new, ev_f, ev_p, mat
     configuration and dt F_e theta/2 (creation) or -dt F_e theta/2 (breaking) at the next one, each along the
     line of centres of the configuration where it is applied (equal and opposite on the two monomers, no
     torque). A breaking also gets (1 - theta) Z here and theta Z at the next configuration (the sqrt-cusp term
-    of the module docstring). ``ev_f``, ``ev_p`` are the corrections due here from the previous step.
+    of the module docstring). ``ev_f``, ``ev_i``, ``ev_j`` are the corrections due here from the previous step.
 
-    Returns (Fe, ev_f_next, ev_p_next): the correction force at ``x`` (N, 3) [dyn] (impulse over dt) and the per
-    slot normal forces [dyn] and partners due at the next configuration (N, 2K).
+    Returns (Fe, ev_f_next, ev_i_next, ev_j_next): the correction force at ``x`` (N, 3) [dyn] (impulse over dt)
+    and the per slot normal forces [dyn] and pairs due at the next configuration (2C,).
     """
-    N, K = partner.shape
+    N = x.shape[0]
     r1 = mat.r1
     # breaking: delta_old >= -delta_c > delta_new, theta = (delta_old + delta_c)/(delta_old - delta_new) in [0, 1)
-    dbo = _compression(x_old, partner_old, broken, r1)
-    dbn = _compression(x, partner_old, broken, r1)
+    dbo = _compression(x_old, ci_old, cj_old, broken, r1)
+    dbn = _compression(x, ci_old, cj_old, broken, r1)
     th_b = jnp.clip((dbo + mat.delta_c) / jnp.where(broken, dbo - dbn, 1.0), 0.0, 1.0)
     f_b = _F_AT_BREAKING * mat.F_c
     # the samples dt F(delta_j) of the last steps before a breaking see the sqrt of the vertical tangent: with
@@ -481,45 +472,45 @@ def _event_impulses(x_old, x, partner_old, broken, partner, new, ev_f, ev_p, mat
     z_b = -_F_SQRT * mat.F_c * jnp.sqrt(jnp.maximum(jnp.where(broken, dbo - dbn, mat.delta0), 0.0) / mat.delta0) * (
         _hurwitz_zeta_m_half(th_b))
     # creation: delta_old < 0 <= delta_new, theta = delta_old/(delta_old - delta_new) in (0, 1]
-    dco = _compression(x_old, partner, new, r1)
-    dcn = _compression(x, partner, new, r1)
+    dco = _compression(x_old, ci, cj, new, r1)
+    dcn = _compression(x, ci, cj, new, r1)
     th_c = jnp.clip(dco / jnp.where(new, dco - dcn, 1.0), 0.0, 1.0)
     f_c = _F_AT_CREATION * mat.F_c
     f_now = jnp.concatenate([jnp.where(broken, 0.5 * f_b * (3.0 * th_b - 1.0) + (1.0 - th_b) * z_b, 0.0),
-                             jnp.where(new, 0.5 * f_c * (1.0 - 3.0 * th_c), 0.0), ev_f], axis=1)
-    p_now = jnp.concatenate([jnp.where(broken, partner_old, N), jnp.where(new, partner, N), ev_p], axis=1)
-    occupied = p_now < N
-    xi, xj = _safe_pairs(x, p_now, occupied, r1)
+                             jnp.where(new, 0.5 * f_c * (1.0 - 3.0 * th_c), 0.0), ev_f])
+    i_now = jnp.concatenate([jnp.where(broken, ci_old, N), jnp.where(new, ci, N), ev_i])
+    j_now = jnp.concatenate([jnp.where(broken, cj_old, N), jnp.where(new, cj, N), ev_j])
+    occupied = i_now < N
+    xi, xj = _safe_pairs(x, i_now, j_now, occupied, r1)
     nc, _ = _unit(xi - xj)
     J = jnp.where(occupied, f_now, 0.0)[..., None] * nc
-    Fe = jnp.sum(J, axis=1) + jax.ops.segment_sum(-J.reshape(-1, 3), p_now.reshape(-1), num_segments=N + 1)[:N]
+    Fe = _pair_sum(J, -J, i_now, j_now, occupied, N)
     ev_f_next = jnp.concatenate([jnp.where(broken, -0.5 * f_b * th_b + th_b * z_b, 0.0),
-                                 jnp.where(new, 0.5 * f_c * th_c, 0.0)], axis=1)
-    ev_p_next = jnp.concatenate([jnp.where(broken, partner_old, N), jnp.where(new, partner, N)],
-                                axis=1).astype(ev_p.dtype)
-    return Fe, ev_f_next, ev_p_next
+                                 jnp.where(new, 0.5 * f_c * th_c, 0.0)])
+    ev_i_next = jnp.concatenate([jnp.where(broken, ci_old, N), jnp.where(new, ci, N)]).astype(ev_i.dtype)
+    ev_j_next = jnp.concatenate([jnp.where(broken, cj_old, N), jnp.where(new, cj, N)]).astype(ev_j.dtype)
+    return Fe, ev_f_next, ev_i_next, ev_j_next
 
 
 
 def _clip_buffer(n_slots: int) -> int:
-    """Static number of contact slots that the compacted inelastic clipping handles (1/16 of the table, >= 32)."""
-    return min(n_slots, max(32, n_slots // 16))
+    """Static number of contact slots that the compacted inelastic clipping handles (1/8 of the list, >= 32)."""
+    return min(n_slots, max(32, n_slots // 8))
 
 
-def _clip(x, partner, active, n_i, n_j, phi, mat):
-    """Inelastic clipping (Wada et al. 2007 eqs. 39-43, ``interactions.clip_inelastic``) of the contact table.
+def _clip(x, ci, cj, active, n_i, n_j, phi, mat):
+    """Inelastic clipping (Wada et al. 2007 eqs. 39-43, ``interactions.clip_inelastic``) of the contact list.
 
     Only the contacts past a critical displacement (|zeta| > zeta_crit, |xi| > xi_crit or |phi_s| > phi_crit, the
     test of ``clip_inelastic``) change, so they are gathered into a buffer of :func:`_clip_buffer` slots, clipped
-    there and scattered back; nothing runs when none is over its limit, and the whole table is clipped when more
+    there and scattered back; nothing runs when none is over its limit, and the whole list is clipped when more
     than the buffer are (the branch is chosen by the largest count of a ``vmap`` batch). The other slots are
     returned unchanged, as ``clip_inelastic`` itself returns them. Returns (n_i, n_j, phi, dE) with dE = (dE_s,
     dE_r, dE_t) [erg] summed over the contacts.
     """
-    N, K = partner.shape
-    L = N * K
+    L = ci.shape[0]
     nbuf = _clip_buffer(L)
-    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
     ni0, nj0, ph0 = _safe_pointers(n_i, n_j, phi, active)
     _, _, _, _, zeta, xiv = contact_geometry(xi, xj, ni0, nj0, mat)
     over = active & ((_norm(zeta) > mat.zeta_crit) | (_norm(xiv) > mat.xi_crit) | (jnp.abs(ph0) > mat.phi_crit))
@@ -530,10 +521,10 @@ def _clip(x, partner, active, n_i, n_j, phi, mat):
         return n_i, n_j, phi, jnp.zeros(3)
 
     def compact(_):
-        idx = jnp.nonzero(over.reshape(L), size=nbuf, fill_value=L)[0]
-        take = lambda a: a.reshape((L,) + a.shape[2:])[jnp.minimum(idx, L - 1)]  # noqa: E731
+        idx = jnp.nonzero(over, size=nbuf, fill_value=L)[0]
+        take = lambda a: a[jnp.minimum(idx, L - 1)]  # noqa: E731
         ni1, nj1, ph1, dEs, dEr, dEt = clip_inelastic(take(xi), take(xj), take(ni0), take(nj0), take(ph0), mat)
-        put = lambda a, b: a.reshape((L,) + a.shape[2:]).at[idx].set(b, mode="drop").reshape(a.shape)  # noqa: E731
+        put = lambda a, b: a.at[idx].set(b, mode="drop")  # noqa: E731
         ok = idx < L
         dE = jnp.stack([jnp.sum(jnp.where(ok, e, 0.0)) for e in (dEs, dEr, dEt)])
         return put(n_i, ni1), put(n_j, nj1), put(phi, ph1), dE
@@ -557,7 +548,8 @@ def init_state(x, v, w, mat, *, dim=3, capacity=None, neighbours=None, skin=0.1,
             v_z = 0, w along z).
         mat: :class:`~jaxcoag.aggregates.contact.materials.Material`.
         dim: 2 (planar) or 3 (static; sets the neighbour-cell stencil).
-        capacity: contact slots per monomer (default 6 in 2-D, 12 in 3-D).
+        capacity: contact slots per monomer, the list holds capacity x N contacts (default 2 in 2-D, 3 in 3-D,
+            :func:`default_capacity`).
         neighbours: neighbour-list slots per monomer (default 8 in 2-D, 16 in 3-D).
         skin: Verlet skin in units of r1 (cutoff 2 r1 + skin r1).
         t0: start time [s].
@@ -582,18 +574,20 @@ def init_state(x, v, w, mat, *, dim=3, capacity=None, neighbours=None, skin=0.1,
 @functools.partial(jax.jit, static_argnames=("dim", "K", "Kn"))
 def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
     N = x.shape[0]
+    C = K * N
     cutoff = (2.0 + skin) * mat.r1
     nbr, ovf_nb = _build_neighbours(x, cutoff, Kn, dim)
-    partner = jnp.full((N, K), N, jnp.int32)
-    active = jnp.zeros((N, K), bool)
-    z3 = jnp.zeros((N, K, 3))
-    partner, active, n_i, n_j, phi, _, ovf_c = _create(x, partner, active, z3, z3, jnp.zeros((N, K)), nbr, mat)
-    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, partner, active, n_i, n_j, phi, mat)
+    ci = jnp.full((C,), N, jnp.int32)
+    active = jnp.zeros((C,), bool)
+    z3 = jnp.zeros((C, 3))
+    ci, cj, active, n_i, n_j, phi, _, ovf_c = _create(x, ci, ci, active, z3, z3, jnp.zeros((C,)), nbr, mat)
+    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, ci, cj, active, n_i, n_j, phi, mat)
     flags = jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
     i64 = lambda n: jnp.asarray(n, jnp.int64)  # noqa: E731
-    return DEMState(x=x, v=v, w=w, F=F, M=M, partner=partner, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
+    none = jnp.full((2 * C,), N, jnp.int32)
+    return DEMState(x=x, v=v, w=w, F=F, M=M, ci=ci, cj=cj, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
                     x_ref=x, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=jnp.zeros(4), Fe=jnp.zeros((N, 3)),
-                    ev_f=jnp.zeros((N, 2 * K)), ev_p=jnp.full((N, 2 * K), N, jnp.int32), axes=jnp.ones((dim,), bool),
+                    ev_f=jnp.zeros((2 * C,)), ev_i=none, ev_j=none, axes=jnp.ones((dim,), bool),
                     step=i64(0), t0=t0,
                     flags=flags.astype(jnp.int32), n_events=i64(0), first_event=i64(-1), last_event=i64(-1),
                     n_builds=i64(1))
@@ -602,23 +596,22 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
 # ------------------------------------------------------------------------------------------------- step
 def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     """One kick-drift-kick step (module docstring)."""
-    N, K = st.partner.shape
+    N = st.x.shape[0]
     m1, I1 = mat.m1, mat.I1
     v = st.v + (0.5 * dt / m1) * (st.F + st.Fe)
     w = st.w + (0.5 * dt / I1) * st.M
     x = st.x + dt * v
-    partner, active = st.partner, st.active
-    wi = jnp.broadcast_to(w[:, None, :], st.n_i.shape)
-    wj = _gather(w, partner)
+    ci, cj, active = st.ci, st.cj, st.active
     # pointers rotate with their monomer (Rodrigues, ``interactions.rotate``): coefficients once per monomer
     th = w * dt
     s_rot, c_rot = rotation_coefficients(th)
-    n_i = rotate_by(st.n_i, jnp.broadcast_to(th[:, None, :], st.n_i.shape),
-                    jnp.broadcast_to(s_rot[:, None], partner.shape), jnp.broadcast_to(c_rot[:, None], partner.shape))
-    n_j = rotate_by(st.n_j, _gather(th, partner), _gather(s_rot, partner), _gather(c_rot, partner))
-    xi, xj = _safe_pairs(x, partner, active, mat.r1)
+    rot = jnp.concatenate([th, s_rot[:, None], c_rot[:, None]], axis=1)
+    ri, rj = _gather(rot, ci), _gather(rot, cj)
+    n_i = rotate_by(st.n_i, ri[:, :3], ri[:, 3], ri[:, 4])
+    n_j = rotate_by(st.n_j, rj[:, :3], rj[:, 3], rj[:, 4])
+    xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
     nc, _ = _unit(xi - xj)
-    phi = jnp.where(active, st.phi + dt * _dot(wi - wj, nc), 0.0)
+    phi = jnp.where(active, st.phi + _dot(ri[:, :3] - rj[:, :3], nc), 0.0)
     E_dis = st.E_dis
     flags = st.flags
     n_ev = jnp.zeros((), jnp.int64)
@@ -626,14 +619,14 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     # event times (module docstring): the correction applied at st.x did the work (1/2) Fe.dx in this step's first
     # half kick; corrections are made only by this step's events (else Fe = 0 and nothing is pending)
     E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(st.Fe, v)))
-    Fe, ev_f, ev_p = jnp.zeros_like(st.Fe), jnp.zeros_like(st.ev_f), jnp.full_like(st.ev_p, N)
+    Fe, ev_f, ev_i, ev_j = jnp.zeros_like(st.Fe), jnp.zeros_like(st.ev_f), jnp.full_like(st.ev_i, N), jnp.full_like(st.ev_j, N)
     if not cfg.freeze:
-        partner_old = partner
-        partner, active, broken = _break(x, partner, active, mat)
+        ci_old, cj_old = ci, cj
+        ci, cj, active, broken = _break(x, ci, cj, active, mat)
         # energy ledger of a breaking (module docstring): the stored energies of the contact leave U; the
         # work of its last half kick, done in this step's first half kick, is part of the kinetic energy
-        wb = jnp.where(broken, _work(st.Fc, st.Mc1, st.Mc2, st.partner, dt * v, dt * w), 0.0)
-        E_dis = E_dis + jnp.sum(jnp.where(broken[..., None], st.Uc, 0.0), axis=(0, 1)) - jnp.zeros(4).at[0].set(
+        wb = jnp.where(broken, _work(st.Fc, st.Mc1, st.Mc2, ci_old, cj_old, dt * v, dt * w), 0.0)
+        E_dis = E_dis + jnp.sum(jnp.where(broken[..., None], st.Uc, 0.0), axis=0) - jnp.zeros(4).at[0].set(
             jnp.sum(wb))
         cutoff = (2.0 + skin) * mat.r1
         disp2 = jnp.max(_dot(x - st.x_ref, x - st.x_ref))
@@ -653,7 +646,7 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         xn = _gather(x, nbr)
         _, dn = _unit(jnp.broadcast_to(x[:, None, :], xn.shape) - xn)
         n_touch = jnp.sum((nbr < x.shape[0]) & (2.0 * mat.r1 - dn >= 0))
-        xi, xj = _safe_pairs(x, partner, active, mat.r1)
+        xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
         _, dc = _unit(xi - xj)
         n_touch_old = jnp.sum(active & (2.0 * mat.r1 - dc >= 0))
 
@@ -661,40 +654,41 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
             return _create(x, *args, nbr, mat)
 
         def no_create(args):
-            p, a, ni_, nj_, ph = args
-            return p, a, ni_, nj_, ph, jnp.zeros_like(a), jnp.zeros((), bool)
+            i_, j_, a, ni_, nj_, ph = args
+            return i_, j_, a, ni_, nj_, ph, jnp.zeros_like(a), jnp.zeros((), bool)
 
         maybe_new = n_touch > n_touch_old
-        partner, active, n_i, n_j, phi, new, ovf_c = _cond_members(maybe_new, create, no_create,
-                                                                   (partner, active, n_i, n_j, phi))
+        ci, cj, active, n_i, n_j, phi, new, ovf_c = _cond_members(maybe_new, create, no_create,
+                                                                  (ci, cj, active, n_i, n_j, phi))
         flags = flags | jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
         n_ev = (jnp.sum(broken) + jnp.sum(new)).astype(jnp.int64)
         if cfg.events:
             # the corrections due here (this step's events and the previous step's pending ones) do the work
             # (1/2) Fe.dx in this step's second half kick
             def correct(_):
-                return _event_impulses(st.x, x, partner_old, broken, partner, new, st.ev_f, st.ev_p, mat)
+                return _event_impulses(st.x, x, ci_old, cj_old, broken, ci, cj, new, st.ev_f, st.ev_i, st.ev_j,
+                                       mat)
 
             def no_correct(_):
-                return Fe, ev_f, ev_p
+                return Fe, ev_f, ev_i, ev_j
 
-            pending = (n_ev > 0) | jnp.any(st.ev_p < N)
-            Fe, ev_f, ev_p = _cond_members(pending, correct, no_correct, None)
+            pending = (n_ev > 0) | jnp.any(st.ev_i < N)
+            Fe, ev_f, ev_i, ev_j = _cond_members(pending, correct, no_correct, None)
             E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(Fe, v)))
     if cfg.inelastic:
-        n_i, n_j, phi, dE = _clip(x, partner, active, n_i, n_j, phi, mat)
+        n_i, n_j, phi, dE = _clip(x, ci, cj, active, n_i, n_j, phi, mat)
         E_dis = E_dis + jnp.concatenate([jnp.zeros(1), dE])
-    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, partner, active, n_i, n_j, phi, mat)
+    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, ci, cj, active, n_i, n_j, phi, mat)
     if not cfg.freeze:
         # creation: U_n jumps from 0 to U_n(delta), and the second half kick does the new contact's work
-        wc = _work(Fc, Mc1, Mc2, partner, dt * v, dt * w)
+        wc = _work(Fc, Mc1, Mc2, ci, cj, dt * v, dt * w)
         E_dis = E_dis.at[0].add(-jnp.sum(jnp.where(new, Uc[..., 0] + wc, 0.0)))
     v = v + (0.5 * dt / m1) * (F + Fe)
     w = w + (0.5 * dt / I1) * M
     stp = st.step + 1
     event = n_ev > 0
-    return DEMState(x=x, v=v, w=w, F=F, M=M, partner=partner, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
-                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, Fe=Fe, ev_f=ev_f, ev_p=ev_p,
+    return DEMState(x=x, v=v, w=w, F=F, M=M, ci=ci, cj=cj, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
+                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, Fe=Fe, ev_f=ev_f, ev_i=ev_i, ev_j=ev_j,
                     axes=st.axes, step=stp, t0=st.t0,
                     flags=flags, n_events=st.n_events + n_ev,
                     first_event=jnp.where(event & (st.first_event < 0), stp, st.first_event),
