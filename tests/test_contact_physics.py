@@ -183,6 +183,26 @@ def test_force_is_potential_derivative_and_custom_jvp():
     assert np.isfinite(g_near) and abs(g_near) > 1e3 * float(mat.F_c / mat.delta_c)
 
 
+def test_force_and_potential_in_integer_powers_match_the_separate_forms():
+    """normal_force_and_potential (y = (a/a_0)^(1/2), integer powers: the DEM's form) equals normal_force and
+    normal_potential (x^1.5, x^3.5) to 1e-13, dU/ddelta = F and dF/ddelta = normal_stiffness hold for it
+    (jax.grad, above separation)."""
+    mat = M.ice(r1=1e-5, xi_crit=2e-8)
+    dc = float(mat.delta_c)
+    d = jnp.array([-1.0, -0.99, -0.7, -0.48, -0.2, 0.0, 0.5, 1.2114, 3.0, 20.0, 60.0]) * dc
+    fu = jax.jit(J.normal_force_and_potential)
+    F, U = fu(d, mat)
+    np.testing.assert_allclose(np.asarray(F), np.asarray(jax.vmap(lambda z: _F(z, mat))(d)), rtol=1e-13,
+                               atol=1e-15 * float(mat.F_c))
+    np.testing.assert_allclose(np.asarray(U), np.asarray(jax.vmap(lambda z: _U(z, mat))(d)), rtol=1e-13,
+                               atol=1e-15 * float(mat.F_c * mat.delta_c))
+    # at -delta_c (d[0]) the derivative is masked to 0, as for contact_radius_ratio
+    dU = jax.jit(jax.vmap(jax.grad(lambda z: J.normal_force_and_potential(z, mat)[1])))(d[1:])
+    np.testing.assert_allclose(np.asarray(dU), np.asarray(F[1:]), rtol=1e-11, atol=1e-14 * float(mat.F_c))
+    dF = jax.jit(jax.vmap(jax.grad(lambda z: J.normal_force_and_potential(z, mat)[0])))(d[1:])
+    np.testing.assert_allclose(np.asarray(dF), np.asarray(jax.vmap(lambda z: _K(z, mat))(d[1:])), rtol=1e-11)
+
+
 def _pair(mat, tilt1, tilt2, offset, seed=0):
     """Two monomers near equilibrium with pointers tilted by random tangential vectors of size tilt*delta_c/r1."""
     rng = np.random.default_rng(seed)

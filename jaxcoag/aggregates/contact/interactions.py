@@ -37,7 +37,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .jkr import normal_force, normal_potential
+from .jkr import normal_force_and_potential
 
 __all__ = ["ContactForces", "contact_geometry", "contact_forces", "clip_inelastic", "rotate", "rotation_coefficients",
            "rotate_by"]
@@ -129,8 +129,7 @@ def contact_forces(x1, x2, n1, n2, phi_s, mat) -> ContactForces:
     phi_s = jnp.asarray(phi_s)
     dist, n_c, delta, z0, zeta, xi = contact_geometry(x1, x2, n1, n2, mat)
     # normal (eqs. 5-7)
-    F_n = normal_force(delta, mat)
-    U_n = normal_potential(delta, mat)
+    F_n, U_n = normal_force_and_potential(delta, mat)
     # sliding (eqs. 11, 14, 15-17)
     k_s = mat.k_s
     fac = (r_1 + r_2 - _dot(z0, n_c)) / jnp.where(dist > 0, dist, 1.0)
