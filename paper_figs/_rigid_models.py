@@ -79,8 +79,8 @@ def summarize(res, spectrum_idx) -> dict:
     M = np.where(np.asarray(o["alive"]), np.asarray(o["M"]), 0.0) / float(res.m0)
     Ms = np.sort(M, axis=-1)
     spec = np.asarray(res.mass_spectrum())
-    ag = res.aggregates(-1)
-    ag_c = res.aggregates(-1, include_radius=False)   # centre distances: the other reading of R95 §3
+    ag = res.aggregates(-1, include_radius=True)      # edge distances r + R (stored as f_D)
+    ag_c = res.aggregates(-1, include_radius=False)   # centre distances (the library default, spec A9)
     out = dict(
         t=np.asarray(res.t).tolist(),
         N=np.asarray(res.n_aggregates).astype(int).tolist(),

@@ -156,7 +156,7 @@ def main(argv=None):
     xyz = np.asarray(st.sph_b)[members] @ A.T  # space-frame offsets from the aggregate's COM
     Rs = np.asarray(st.sph_R)[members]
     com = np.average(xyz, axis=0, weights=np.asarray(st.sph_m)[members])
-    fd_render = _fd_regression(np.linalg.norm(xyz - com, axis=1) + Rs)
+    fd_render = _fd_regression(np.linalg.norm(xyz - com, axis=1))  # member-centre distances (A9)
     ck.add(f"f_D of the rendered aggregate (slot {slot}) = diagnostics' value", fd_render, float(ag["f_D"][sec]), 1e-9)
     ck.add("members of the rendered aggregate = its N_a", len(members), int(na[sec]), 0.0, absolute=True)
 

@@ -21,7 +21,8 @@ monomers (same run length) measured 2.6 s of CPU against 3.2 s for the loop, aft
 used (``collide`` takes one scalar v_imp, and runs at different speeds have different lengths).
 
 Reduced sweep (full mode of this script; measured 2015 s of runs for its 28 collisions, 1.9e6 steps, plus ~90 s
-of compilation per size):
+of compilation per size, under load with the first contact layout; 301 s in all, compilation included, on idle
+cores with the flat contact list of stop 29):
 * N_total = 64 (32 + 32): ice 30 A, 2 structures, v_imp = 1-18 v_0 (8 speeds, 7 for the second structure;
   x_roll 0.003-0.93, x_break 0.08-27); ice 2 A, 1 structure, v_imp = 1, 2, 3, 4.9, 8 v_0 (x_roll 0.04-2.8);
 * N_total = 256 (128 + 128): ice 30 A, 2 structures, v_imp = 1.5, 2.3, 3.5, 5.3 v_0 (x_roll 0.006-0.08: the range

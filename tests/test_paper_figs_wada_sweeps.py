@@ -55,7 +55,8 @@ def test_bad_options_are_refused_before_any_run(tmp_path):
 @pytest.mark.slow
 def test_figW07_W11_W14_reduced_sweep(tmp_path):
     """The reduced sweep (N_total = 64: ice 30 A, 2 structures, and ice 2 A; N_total = 256: ice 30 A over
-    E_roll < E_imp < 0.1 n_k E_roll, 2 structures; ~40 min on 2 loaded cores) with the bands of Wada et al. §5 that
+    E_roll < E_imp < 0.1 n_k E_roll, 2 structures; 5 min on 2 idle cores with the flat contact list of stop 29, ~40 min
+    on 2 loaded cores before) with the bands of Wada et al. §5 that
     each size supports (see the script's docstring). The quick test above covers the same code path on 8 + 8
     monomers."""
     res = load_script(FIGS / "figW07_W11_W14_sweep.py").main(["--out", str(tmp_path)])

@@ -97,13 +97,18 @@ def test_fractal_dimension_matches_linregress():
     agg = np.concatenate([np.full(s, i) for i, s in enumerate(sizes)])
     r = rng.uniform(0.05, 3.0, agg.size)
     R = np.full(agg.size, 0.1)
-    fd, err = diag.fractal_dimension(r, agg, R)
+    fd, err = diag.fractal_dimension(r, agg, R, include_radius=True)
     for i, s in enumerate(sizes):
         rr = np.sort(r[agg == i] + 0.1)
         lr = stats.linregress(np.log(rr), np.log(np.arange(1, s + 1)))
         assert fd[i] == pytest.approx(lr.slope, rel=1e-12)
         assert err[i] == pytest.approx(lr.stderr, rel=1e-10)
     assert np.all(np.isnan(fd[len(sizes):]))  # slots without members
+    # the default reads member-centre distances (spec A9): the same fit without the radius
+    fd_c, err_c = diag.fractal_dimension(r, agg, R)
+    for i, s in enumerate(sizes):
+        lr = stats.linregress(np.log(np.sort(r[agg == i])), np.log(np.arange(1, s + 1)))
+        assert fd_c[i] == pytest.approx(lr.slope, rel=1e-12) and err_c[i] == pytest.approx(lr.stderr, rel=1e-10)
 
 
 def test_fractal_dimension_exact_power_law_and_small_aggregates():

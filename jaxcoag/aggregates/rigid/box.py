@@ -1040,11 +1040,11 @@ class BoxResult(AbstractResult):
         return jax.vmap(lambda kk: jnp.bincount(kk, length=kmax + 1)[1:])(jnp.minimum(k, kmax + 1) *
                                                                           (k <= kmax))
 
-    def aggregates(self, i=-1, *, include_radius=True, min_members=3):
+    def aggregates(self, i=-1, *, include_radius=False, min_members=3):
         """Per-aggregate properties at output i (numpy, live slots only): dict of ``slot``, ``n_a`` (members),
         ``mass``, ``Rmax`` (R7), ``rho`` = M/((4/3)π R_max³), ``f_D`` and ``f_D_err`` (sorted-distance
-        regression, NaN for N_a < ``min_members``; ``include_radius``: distances to the sphere edges
-        r + R (default) or to the centres r, the convention R95 leaves open:
+        regression, NaN for N_a < ``min_members``; ``include_radius``: distances to the sphere centres r
+        (False, the default, the spec's A9 reading) or to the edges r + R, the convention R95 leaves open:
         :func:`~jaxcoag.aggregates.rigid.diagnostics.fractal_dimension`), ``ke`` (translational + rotational)."""
         o = {k: np.asarray(v[i]) for k, v in self.outs.items() if np.ndim(v) >= 2}
         fd, err = diag.fractal_dimension(o["sph_r"], o["sph_agg"], np.asarray(self.final_state.sph_R),
@@ -1055,7 +1055,7 @@ class BoxResult(AbstractResult):
                     rho=diag.density(o["M"][sl], Rm), f_D=np.asarray(fd)[sl], f_D_err=np.asarray(err)[sl],
                     ke=o["ke_trans"][sl] + o["ke_rot"][sl])
 
-    def fractal_dimension(self, i=-1, *, include_radius=True, min_members=3):
+    def fractal_dimension(self, i=-1, *, include_radius=False, min_members=3):
         """(f_D per live aggregate, its standard error, weighted mean f_D, its standard error) at output i (R95 §3);
         ``include_radius``, ``min_members``: as in :meth:`aggregates`."""
         ag = self.aggregates(i, include_radius=include_radius, min_members=min_members)

@@ -6,8 +6,10 @@ Definitions (R95 §3; the spec's A9 fixes the points the paper leaves open):
 * fractal dimension per aggregate: sort the member distances from the COM, ``r_(1) <= ... <= r_(N_a)``,
   set ``N(<r_(k)) = k`` and take the least-squares slope of ``log k`` against ``log r_(k)``; its error is
   the regression standard error. Only aggregates with ``N_a >= 3`` are fitted. R95 does not say whether
-  the distance is to the sphere centre or to its outer edge; the default (``include_radius=True``) uses
-  ``r_i + R_i``, which is never zero (a member sitting at the COM would otherwise give log 0).
+  the distance is to the sphere centre or to its outer edge; the default (``include_radius=False``) uses the
+  member-centre distances ``r_i``, as the spec's A9 reads it (a member exactly at the COM, r = 0, keeps its rank
+  k but is left out of the fit); ``include_radius=True`` fits ``r_i + R_i``. Measured on models (iii)/(iv) at
+  T = 8.2 (stop 27), the centre reading reproduces R95's f_D = 1.7-1.8 and the edge reading is 0.35-0.4 higher.
   The mean f_D of a population is weighted by ``1/σ²``.
 * spherically averaged density ``ρ = M / ((4/3) π R_max³)``; γ is the log-log slope of ρ against N_a,
   and ``f_D = 3 / (1 − γ)`` (R32) relates the two.
@@ -54,7 +56,7 @@ def r_max(sph_r, sph_agg, sph_R, n_slots=None):
     return out
 
 
-def fractal_dimension(sph_r, sph_agg, sph_R, *, include_radius=True, min_members=3):
+def fractal_dimension(sph_r, sph_agg, sph_R, *, include_radius=False, min_members=3):
     """Fractal dimension of every aggregate by the sorted-distance regression (R95 §3, Fig. 6b).
 
     For the members of one aggregate, sorted by distance ``r_(k)`` from the COM (plus the sphere
@@ -65,7 +67,7 @@ def fractal_dimension(sph_r, sph_agg, sph_R, *, include_radius=True, min_members
         sph_r: (n,) member-centre distances from their aggregate's COM [length].
         sph_agg: (n,) owning slot of each sphere.
         sph_R: (n,) sphere radii [length].
-        include_radius: fit ``r + R`` (default) or the centre distance ``r``.
+        include_radius: fit the centre distance ``r`` (False, the default) or ``r + R`` (True).
         min_members: smallest N_a fitted (default 3; a 2-point fit has no error).
 
     Returns:
