@@ -298,8 +298,12 @@ def _evaluate(x, ci, cj, active, n_i, n_j, phi, mat):
     """Force [dyn] and torque [dyn cm] on every monomer, the four potential energies (U_n, U_s, U_r, U_t) [erg]
     summed over the contacts, and per contact slot (zero where empty): the energies (C, 4) [erg], the force on
     monomer ci (C, 3) [dyn] and the torques on ci and cj (C, 3) [dyn cm]."""
-    N = x.shape[0]
     xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
+    return _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, x.shape[0])
+
+
+def _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N):
+    """:func:`_evaluate` from the pair-end positions (C, 3) of :func:`_safe_pairs` (gathered once per step)."""
     ni, nj, ph = _safe_pointers(n_i, n_j, phi, active)
     cf = contact_forces(xi, xj, ni, nj, ph, mat)
     a = active[..., None]
@@ -309,13 +313,6 @@ def _evaluate(x, ci, cj, active, n_i, n_j, phi, mat):
     Uc = jnp.where(a, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1), 0.0)
     FM = _pair_sum(jnp.concatenate([F1, M1], axis=-1), jnp.concatenate([-F1, M2], axis=-1), ci, cj, active, N)
     return FM[:, :3], FM[:, 3:], jnp.sum(Uc, axis=0), Uc, F1, M1, M2
-
-
-def _work(Fc, Mc1, Mc2, ci, cj, dx, dth):
-    """Half the work of each contact's force and torques over a step, (1/2) [F.(dx_i - dx_j) + M_1.dth_i +
-    M_2.dth_j] [erg] (C,): the leapfrog's half kick with a contact that exists at only one end of the step."""
-    return 0.5 * (_dot(Fc, _gather(dx, ci) - _gather(dx, cj)) + _dot(Mc1, _gather(dth, ci))
-                  + _dot(Mc2, _gather(dth, cj)))
 
 
 # ------------------------------------------------------------------------------------------------- neighbours
@@ -403,16 +400,6 @@ def _create(x, ci, cj, active, n_i, n_j, phi, nbr, mat):
     return ci, cj, active | new, n_i, n_j, phi, new, overflow
 
 
-def _break(x, ci, cj, active, mat):
-    """Break the contacts with delta < -delta_c (Wada et al. 2007 §2.1). Returns (ci, cj, active, broken mask)."""
-    N = x.shape[0]
-    xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
-    _, dist = _unit(xi - xj)
-    broken = active & (2.0 * mat.r1 - dist < -mat.delta_c)
-    active = active & ~broken
-    return jnp.where(active, ci, N), jnp.where(active, cj, N), active, broken
-
-
 # JKR normal force at the two events in units of F_c (Wada et al. 2007 eq. 5; ``jkr.normal_force``): F(0) at a/a_0 =
 # (2/3)^(2/3) and F(-delta_c) at a/a_0 = 6^(-2/3), both attractive
 _F_AT_CREATION = -8.0 / 9.0
@@ -498,7 +485,7 @@ def _clip_buffer(n_slots: int) -> int:
     return min(n_slots, max(32, n_slots // 8))
 
 
-def _clip(x, ci, cj, active, n_i, n_j, phi, mat):
+def _clip(xi, xj, active, n_i, n_j, phi, mat):
     """Inelastic clipping (Wada et al. 2007 eqs. 39-43, ``interactions.clip_inelastic``) of the contact list.
 
     Only the contacts past a critical displacement (|zeta| > zeta_crit, |xi| > xi_crit or |phi_s| > phi_crit, the
@@ -506,11 +493,10 @@ def _clip(x, ci, cj, active, n_i, n_j, phi, mat):
     there and scattered back; nothing runs when none is over its limit, and the whole list is clipped when more
     than the buffer are (the branch is chosen by the largest count of a ``vmap`` batch). The other slots are
     returned unchanged, as ``clip_inelastic`` itself returns them. Returns (n_i, n_j, phi, dE) with dE = (dE_s,
-    dE_r, dE_t) [erg] summed over the contacts.
+    dE_r, dE_t) [erg] summed over the contacts. ``xi``, ``xj``: pair-end positions (C, 3) of :func:`_safe_pairs`.
     """
-    L = ci.shape[0]
+    L = active.shape[0]
     nbuf = _clip_buffer(L)
-    xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
     ni0, nj0, ph0 = _safe_pointers(n_i, n_j, phi, active)
     _, _, _, _, zeta, xiv = contact_geometry(xi, xj, ni0, nj0, mat)
     over = active & ((_norm(zeta) > mat.zeta_crit) | (_norm(xiv) > mat.xi_crit) | (jnp.abs(ph0) > mat.phi_crit))
@@ -595,7 +581,11 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
 
 # ------------------------------------------------------------------------------------------------- step
 def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
-    """One kick-drift-kick step (module docstring)."""
+    """One kick-drift-kick step (module docstring).
+
+    Every per-contact quantity of the monomers (position, displacement dt v, rotation angle dt w and its Rodrigues
+    coefficients) is gathered once per step for both ends of every slot (two gathers of an (N, 11) array); the
+    rare creation branch updates the rows of its new slots."""
     N = st.x.shape[0]
     m1, I1 = mat.m1, mat.I1
     v = st.v + (0.5 * dt / m1) * (st.F + st.Fe)
@@ -605,32 +595,44 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     # pointers rotate with their monomer (Rodrigues, ``interactions.rotate``): coefficients once per monomer
     th = w * dt
     s_rot, c_rot = rotation_coefficients(th)
-    rot = jnp.concatenate([th, s_rot[:, None], c_rot[:, None]], axis=1)
-    ri, rj = _gather(rot, ci), _gather(rot, cj)
-    n_i = rotate_by(st.n_i, ri[:, :3], ri[:, 3], ri[:, 4])
-    n_j = rotate_by(st.n_j, rj[:, :3], rj[:, 3], rj[:, 4])
-    xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
-    nc, _ = _unit(xi - xj)
-    phi = jnp.where(active, st.phi + _dot(ri[:, :3] - rj[:, :3], nc), 0.0)
+    rows = jnp.concatenate([x, dt * v, th, s_rot[:, None], c_rot[:, None]], axis=1)  # (N, 11)
+    gi, gj = _gather(rows, ci), _gather(rows, cj)
+    n_i = rotate_by(st.n_i, gi[:, 6:9], gi[:, 9], gi[:, 10])
+    n_j = rotate_by(st.n_j, gj[:, 6:9], gj[:, 9], gj[:, 10])
+    r1 = mat.r1
+    dummy = jnp.array([[2.0, 0.0, 0.0]]) * r1
+
+    def pair_ends(gi_, gj_, act):  # _safe_pairs from the gathered rows
+        return gi_[:, :3], jnp.where(act[:, None], gj_[:, :3], gi_[:, :3] - dummy)
+
+    xi, xj = pair_ends(gi, gj, active)
+    nc, dist = _unit(xi - xj)
+    phi = jnp.where(active, st.phi + _dot(gi[:, 6:9] - gj[:, 6:9], nc), 0.0)
     E_dis = st.E_dis
     flags = st.flags
     n_ev = jnp.zeros((), jnp.int64)
     nbr, x_ref, n_builds = st.nbr, st.x_ref, st.n_builds
+    new = jnp.zeros_like(active)
     # event times (module docstring): the correction applied at st.x did the work (1/2) Fe.dx in this step's first
     # half kick; corrections are made only by this step's events (else Fe = 0 and nothing is pending)
     E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(st.Fe, v)))
-    Fe, ev_f, ev_i, ev_j = jnp.zeros_like(st.Fe), jnp.zeros_like(st.ev_f), jnp.full_like(st.ev_i, N), jnp.full_like(st.ev_j, N)
+    Fe, ev_f, ev_i, ev_j = (jnp.zeros_like(st.Fe), jnp.zeros_like(st.ev_f), jnp.full_like(st.ev_i, N),
+                            jnp.full_like(st.ev_j, N))
     if not cfg.freeze:
+        # breaking (Wada et al. 2007 §2.1): delta < -delta_c
         ci_old, cj_old = ci, cj
-        ci, cj, active, broken = _break(x, ci, cj, active, mat)
+        broken = active & (2.0 * r1 - dist < -mat.delta_c)
+        active = active & ~broken
+        ci, cj = jnp.where(active, ci, N), jnp.where(active, cj, N)
         # energy ledger of a breaking (module docstring): the stored energies of the contact leave U; the
         # work of its last half kick, done in this step's first half kick, is part of the kinetic energy
-        wb = jnp.where(broken, _work(st.Fc, st.Mc1, st.Mc2, ci_old, cj_old, dt * v, dt * w), 0.0)
+        wb = jnp.where(broken, 0.5 * (_dot(st.Fc, gi[:, 3:6] - gj[:, 3:6]) + _dot(st.Mc1, gi[:, 6:9])
+                                      + _dot(st.Mc2, gj[:, 6:9])), 0.0)
         E_dis = E_dis + jnp.sum(jnp.where(broken[..., None], st.Uc, 0.0), axis=0) - jnp.zeros(4).at[0].set(
             jnp.sum(wb))
-        cutoff = (2.0 + skin) * mat.r1
+        cutoff = (2.0 + skin) * r1
         disp2 = jnp.max(_dot(x - st.x_ref, x - st.x_ref))
-        rebuild = disp2 > (0.5 * skin * mat.r1) ** 2
+        rebuild = disp2 > (0.5 * skin * r1) ** 2
 
         def build(_):
             nb, ovf = _build_neighbours(x, cutoff, nbr.shape[1], cfg.dim)
@@ -645,21 +647,23 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         # (a touching pair, delta >= 0, is in the Verlet list; it is new unless it is an active contact)
         xn = _gather(x, nbr)
         _, dn = _unit(jnp.broadcast_to(x[:, None, :], xn.shape) - xn)
-        n_touch = jnp.sum((nbr < x.shape[0]) & (2.0 * mat.r1 - dn >= 0))
-        xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
-        _, dc = _unit(xi - xj)
-        n_touch_old = jnp.sum(active & (2.0 * mat.r1 - dc >= 0))
+        n_touch = jnp.sum((nbr < x.shape[0]) & (2.0 * r1 - dn >= 0))
+        n_touch_old = jnp.sum(active & (2.0 * r1 - dist >= 0))
 
         def create(args):
-            return _create(x, *args, nbr, mat)
+            i_, j_, a, ni_, nj_, ph, gi_, gj_ = args
+            i_, j_, a, ni_, nj_, ph, nw, ovf = _create(x, i_, j_, a, ni_, nj_, ph, nbr, mat)
+            gi_ = jnp.where(nw[:, None], _gather(rows, i_), gi_)
+            gj_ = jnp.where(nw[:, None], _gather(rows, j_), gj_)
+            return i_, j_, a, ni_, nj_, ph, gi_, gj_, nw, ovf
 
         def no_create(args):
-            i_, j_, a, ni_, nj_, ph = args
-            return i_, j_, a, ni_, nj_, ph, jnp.zeros_like(a), jnp.zeros((), bool)
+            return (*args, jnp.zeros_like(args[2]), jnp.zeros((), bool))
 
         maybe_new = n_touch > n_touch_old
-        ci, cj, active, n_i, n_j, phi, new, ovf_c = _cond_members(maybe_new, create, no_create,
-                                                                  (ci, cj, active, n_i, n_j, phi))
+        ci, cj, active, n_i, n_j, phi, gi, gj, new, ovf_c = _cond_members(
+            maybe_new, create, no_create, (ci, cj, active, n_i, n_j, phi, gi, gj))
+        xi, xj = pair_ends(gi, gj, active)
         flags = flags | jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
         n_ev = (jnp.sum(broken) + jnp.sum(new)).astype(jnp.int64)
         if cfg.events:
@@ -676,20 +680,20 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
             Fe, ev_f, ev_i, ev_j = _cond_members(pending, correct, no_correct, None)
             E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(Fe, v)))
     if cfg.inelastic:
-        n_i, n_j, phi, dE = _clip(x, ci, cj, active, n_i, n_j, phi, mat)
+        n_i, n_j, phi, dE = _clip(xi, xj, active, n_i, n_j, phi, mat)
         E_dis = E_dis + jnp.concatenate([jnp.zeros(1), dE])
-    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, ci, cj, active, n_i, n_j, phi, mat)
+    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N)
     if not cfg.freeze:
         # creation: U_n jumps from 0 to U_n(delta), and the second half kick does the new contact's work
-        wc = _work(Fc, Mc1, Mc2, ci, cj, dt * v, dt * w)
+        wc = 0.5 * (_dot(Fc, gi[:, 3:6] - gj[:, 3:6]) + _dot(Mc1, gi[:, 6:9]) + _dot(Mc2, gj[:, 6:9]))
         E_dis = E_dis.at[0].add(-jnp.sum(jnp.where(new, Uc[..., 0] + wc, 0.0)))
     v = v + (0.5 * dt / m1) * (F + Fe)
     w = w + (0.5 * dt / I1) * M
     stp = st.step + 1
     event = n_ev > 0
     return DEMState(x=x, v=v, w=w, F=F, M=M, ci=ci, cj=cj, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
-                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, Fe=Fe, ev_f=ev_f, ev_i=ev_i, ev_j=ev_j,
-                    axes=st.axes, step=stp, t0=st.t0,
+                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, Fe=Fe, ev_f=ev_f, ev_i=ev_i,
+                    ev_j=ev_j, axes=st.axes, step=stp, t0=st.t0,
                     flags=flags, n_events=st.n_events + n_ev,
                     first_event=jnp.where(event & (st.first_event < 0), stp, st.first_event),
                     last_event=jnp.where(event, stp, st.last_event), n_builds=n_builds)
