@@ -179,3 +179,39 @@ def test_neighbour_list_finds_exactly_the_pairs_within_the_cutoff():
     ref = {(i, j) for i in range(n) for j in range(i + 1, n) if d[i, j] < cutoff}
     assert not bool(ovf)
     assert len(ref) > 50 and got == ref
+
+
+@pytest.mark.parametrize("n_over", [0, 5, 20, 70, 400, 800])
+def test_compacted_clip_matches_clipping_every_contact(n_over):
+    """dem._clip picks a branch by the number of contacts past a critical displacement (none, a buffer of 1/64 or
+    1/8 of the list, the whole list): every branch gives what interactions.clip_inelastic gives on every active
+    slot (pointers, twist and the three dissipated energies to 1e-12), and leaves empty slots alone."""
+    from jaxcoag.aggregates.contact.interactions import clip_inelastic
+
+    rng = np.random.default_rng(n_over)
+    L, n_act = 4096, 3000
+    assert dem._clip_buffers(L) == (64, 512)
+    active = np.zeros(L, bool)
+    active[rng.choice(L, n_act, replace=False)] = True
+    # pairs at delta_0 along random directions; pointers tilted by a tangential vector, large for n_over contacts
+    u = rng.normal(size=(L, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    xi = rng.normal(size=(L, 3)) * R1
+    xj = xi - (2 * R1 - float(MAT.delta0)) * u
+    over = np.zeros(L, bool)
+    over[rng.choice(np.nonzero(active)[0], n_over, replace=False)] = True
+    tilt = np.where(over, 50.0, 0.01)[:, None] * float(MAT.xi_crit) / R1 * rng.normal(size=(L, 3))
+    ni = -u + tilt
+    nj = u + rng.normal(size=(L, 3)) * 0.01 * float(MAT.xi_crit) / R1
+    ni /= np.linalg.norm(ni, axis=1, keepdims=True)
+    nj /= np.linalg.norm(nj, axis=1, keepdims=True)
+    phi = rng.normal(size=L) * 0.01 * float(MAT.phi_crit)
+    ni1, nj1, ph1, dE = jax.jit(dem._clip)(xi, xj, active, ni, nj, phi, MAT)
+    ri, rj, rp, dEs, dEr, dEt = jax.jit(clip_inelastic)(xi, xj, ni, nj, phi, MAT)
+    a = active[:, None]
+    np.testing.assert_allclose(np.asarray(ni1), np.where(a, ri, ni), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(nj1), np.where(a, rj, nj), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(ph1), np.where(active, rp, phi), rtol=0, atol=1e-12)
+    ref = np.array([np.sum(np.where(active, e, 0.0)) for e in (dEs, dEr, dEt)])
+    np.testing.assert_allclose(np.asarray(dE), ref, rtol=1e-12, atol=1e-30)
+    assert (float(np.sum(ref)) > 0) == (n_over > 0)  # the tilted contacts dissipate, the others do not
