@@ -177,6 +177,8 @@ def run_collide(n_half, dim, material, v_imp, *, n_steps, full=False, seed=0):
     time (a lower bound, labelled as a projection). ``full``: also run collide to its outcome and time it.
     """
     import jax
+
+    import jaxcoag
     from jaxcoag.aggregates import contact
 
     a = contact.bcca(n_half, jax.random.key(seed), dim, material=material)
@@ -205,7 +207,7 @@ def run_collide(n_half, dim, material, v_imp, *, n_steps, full=False, seed=0):
         out.update(outcome_s=t.seconds, outcome_steps=int(np.asarray(res.n_steps)),
                    outcome_cluster_sizes=[int(s) for s in np.asarray(res.cluster_sizes) if int(s) > 0][:8],
                    outcome_r_g_r1=float(np.asarray(res.r_g)) / r1, outcome_n_contacts=float(np.asarray(res.n_contacts)),
-                   outcome_status=str(res.status))
+                   outcome_status=jaxcoag.status_names(res.status))
     return out
 
 

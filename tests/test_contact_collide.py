@@ -304,3 +304,36 @@ def test_key_rotates_each_aggregate_rigidly_about_its_centre(pair8):
         np.testing.assert_allclose(y.mean(0), x.mean(0), atol=1e-12 * R1)
         assert np.abs(y - x).max() > 0.1 * R1  # a proper rotation, not the identity
     assert np.array_equal(np.asarray(ra.positions), np.asarray(ra2.positions))  # a function of the key
+
+
+def test_default_capacity_overflow_reruns_with_the_largest_packing(pair8, monkeypatch):
+    """With capacity=None, collide reruns a collision whose contact list overflowed with dem.max_capacity (3 per
+    monomer in 2-D), warning once; the result is the one of a run started with that capacity. The default is
+    lowered to 1 slot per monomer here, so that the 7 + 7 bonds fit (16 slots) and the collision overflows."""
+    a, b = pair8
+    monkeypatch.setattr(dem, "default_capacity", lambda dim: 1)
+    with pytest.warns(RuntimeWarning, match="rerunning the collision from the start with capacity=3"):
+        r = contact.collide(a, b, V_IMP, MAT, t_end=T_END)
+    assert r.status == RESULTS.successful and int(r.final_state.dem.flags) == 0
+    assert r.final_state.dem.ci.shape == (3 * 16,)
+    ref = contact.collide(a, b, V_IMP, MAT, t_end=T_END, capacity=3)
+    np.testing.assert_array_equal(np.asarray(r.positions), np.asarray(ref.positions))
+    assert int(ref.final_state.dem.active.sum()) > 16  # the collision did need more than 1 slot per monomer
+
+
+def test_aggregates_denser_than_the_default_start_with_the_largest_packing():
+    """A hexagonal patch of 19 monomers at equilibrium compression holds 42 contacts, more than the default 2 slots
+    per monomer of 19 + 1 monomers: collide starts with dem.max_capacity (3) instead of refusing or rerunning."""
+    import warnings
+
+    d = 2 * R1 - float(MAT.delta0)
+    pts = [(i * d + j * d / 2, j * d * np.sqrt(3) / 2) for i in range(-2, 3) for j in range(-2, 3) if abs(i + j) <= 2]
+    hexa = contact.Aggregate(jnp.array(pts), R1)
+    assert hexa.n == 19
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        r = contact.collide(hexa, contact.monomer(2), 0.5 * V0, MAT, t_end=20 * TC)
+    assert r.final_state.dem.ci.shape == (3 * 20,) and int(r.final_state.dem.flags) == 0
+    assert int(r.final_state.dem.active.sum()) >= 42
+    with pytest.raises(JaxcoagInputError, match="give capacity >= 3"):
+        contact.collide(hexa, contact.monomer(2), 0.5 * V0, MAT, t_end=20 * TC, capacity=2)

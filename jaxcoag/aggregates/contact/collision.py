@@ -289,16 +289,9 @@ class DEM(AbstractEngine):
 
     def _check_capacity(self, mat, coll):
         """Refuse capacities whose contact list (capacity x N slots) cannot hold the initial contacts."""
-        from scipy.spatial import cKDTree
-
         K = int(self.capacity or _dem.default_capacity(coll.dim))
-        r1 = float(mat.r1)
-        n_tot, have = 0, 0
-        for name in ("a", "b"):
-            x = np.asarray(getattr(coll, name).positions, np.float64)
-            n_tot += x.shape[0]
-            if x.shape[0] >= 2:
-                have += len(cKDTree(x).query_pairs(2.0 * r1, output_type="ndarray"))
+        n_tot = coll.a.n + coll.b.n
+        have = _initial_contacts(coll, mat)
         if have > K * n_tot:
             need = -(-have // n_tot)
             raise JaxcoagInputError(f"DEM(capacity={K}) contact slots per monomer ({K * n_tot} in all) cannot hold the "
@@ -353,6 +346,20 @@ class DEM(AbstractEngine):
             velocities=v, omega=st.w, labels=labels, cluster_sizes=sizes, r_g=r_g, n_contacts=n_con,
             E_imp=state.E_imp, v_imp=state.v_imp, n_steps=st.step, dt=self._dt(kernel), r1=kernel.r1,
             final_state=state)
+
+
+def _initial_contacts(coll, mat):
+    """Number of touching pairs (centre distance <= 2 r1) within the two aggregates of ``coll`` (0 when traced)."""
+    from scipy.spatial import cKDTree
+
+    if not _is_concrete(coll.a.positions, coll.b.positions, mat.r1):
+        return 0
+    n = 0
+    for agg in (coll.a, coll.b):
+        x = np.asarray(agg.positions, np.float64)
+        if x.shape[0] >= 2:
+            n += len(cKDTree(x).query_pairs(2.0 * float(mat.r1), output_type="ndarray"))
+    return n
 
 
 def _warn_flags(flags):
@@ -545,7 +552,11 @@ def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None
         t_end: run length [s]; None: the default end (module docstring).
         key: ``jax.random`` key: rotate a and b by independent uniform random rotations first; None: as given.
         dt: time step [s]; None: 0.014 t_c. Refused above 0.2 t_c.
-        capacity, neighbours: contact and neighbour slots per monomer (see :class:`DEM`).
+        capacity, neighbours: contact and neighbour slots per monomer (see :class:`DEM`). With capacity None the
+            run starts with :func:`~jaxcoag.aggregates.contact.dem.default_capacity` (2 in 2-D, 3 in 3-D) or, when
+            the aggregates already hold more contacts, :func:`~jaxcoag.aggregates.contact.dem.max_capacity` (3, 6);
+            if the list overflows during the run, the collision is rerun from the start with ``max_capacity``
+            (a ``RuntimeWarning`` says so; with ``checkpoint=`` the file is restarted).
         inelastic: inelastic sliding/rolling/twisting (default True).
         record_every: steps between records of the energy budget; None: about 200 records over the default run.
         quiet_steps: steps without contact creation or breaking required before the default end (1e4).
@@ -575,9 +586,15 @@ def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None
     from ...checkpoint import run_segments
 
     require_x64("contact.collide")
+    call = dict(impact_parameter=impact_parameter, t_end=t_end, key=key, dt=dt, neighbours=neighbours,
+                inelastic=inelastic, record_every=record_every, quiet_steps=quiet_steps, max_steps=max_steps, gap=gap,
+                throw=throw, checkpoint=checkpoint, progress=progress)
     coll = Collision(a, b, v_imp, impact_parameter, gap)  # checks a, b before they are rotated
     if key is not None:
         coll = Collision(*_random_rotations(a, b, key), v_imp, impact_parameter, gap)
+    auto = capacity is None
+    if auto and _initial_contacts(coll, material) > _dem.default_capacity(coll.dim) * (coll.a.n + coll.b.n):
+        capacity = _dem.max_capacity(coll.dim)
     engine = DEM(dt=dt, capacity=capacity, neighbours=neighbours, inelastic=bool(inelastic))
     if isinstance(quiet_steps, bool) or not isinstance(quiet_steps, (int, np.integer)) or quiet_steps < 0:
         raise JaxcoagInputError(f"quiet_steps must be an int >= 0; got {quiet_steps!r}.")
@@ -626,6 +643,13 @@ def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None
                               [getattr(res, n)[keep] for n in _RECORDS])
     if t_end is None and not end(res.final_state) and not bool(is_failure(res.status)):
         res = eqx.tree_at(lambda r: r.status, res, RESULTS.max_steps_reached)
+    flags = int(res.final_state.dem.flags)
+    if auto and flags & _dem.FLAG_CONTACTS and int(capacity or 0) < _dem.max_capacity(coll.dim):
+        big = _dem.max_capacity(coll.dim)
+        warnings.warn(f"contact.collide: the contact list of {_dem.default_capacity(coll.dim)} slots per monomer "
+                      f"overflowed at step {int(res.final_state.dem.step)}; rerunning the collision from the start "
+                      f"with capacity={big} (pass capacity={big} to start with it).", RuntimeWarning, stacklevel=2)
+        return collide(a, b, v_imp, material, capacity=big, resume=False, **call)
     if throw:
         flags = int(res.final_state.dem.flags)
         if flags & (_dem.FLAG_CONTACTS | _dem.FLAG_NEIGHBOURS):

@@ -108,7 +108,8 @@ from .interactions import (_dot, _norm, clip_inelastic, contact_forces, contact_
                            rotation_coefficients)
 
 __all__ = ["DEMState", "init_state", "step", "integrate", "integrate_until", "diagnostics", "flags_code",
-           "FLAG_CONTACTS", "FLAG_NEIGHBOURS", "FLAG_NONFINITE", "default_capacity", "default_neighbours"]
+           "FLAG_CONTACTS", "FLAG_NEIGHBOURS", "FLAG_NONFINITE", "default_capacity", "max_capacity",
+           "default_neighbours"]
 
 #: ``DEMState.flags`` bit: the contact list (capacity x N slots) was full.
 FLAG_CONTACTS = 1
@@ -125,6 +126,12 @@ def default_capacity(dim: int) -> int:
     (2-D, hexagonal) and 6 (3-D, fcc) contacts per monomer, random close packing ~3 (coordination ~6). A run
     that needs more stops with status ``capacity_exceeded`` (raise ``capacity``)."""
     return 2 if dim == 2 else 3
+
+
+def max_capacity(dim: int) -> int:
+    """Contact slots per monomer that no packing of equal spheres exceeds: 3 in 2-D (hexagonal) and 6 in 3-D (fcc);
+    ``contact.collide`` reruns with it when the default list overflows."""
+    return 3 if dim == 2 else 6
 
 
 def default_neighbours(dim: int) -> int:
