@@ -24,7 +24,7 @@ State (:class:`DEMState`, fixed capacity, every field an array so that it checkp
   O(N log N), no N^2 step);
 * the energy ledger: potential energies ``U`` = (U_n, U_s, U_r, U_t) at the current configuration and the
   dissipated energies ``E_dis`` = (E_dis,n, E_dis,s, E_dis,r, E_dis,t) [erg];
-* ``flags`` (bit 1: contact table full, 2: neighbour list or cell full, 4: non-finite state), step counter and
+* ``flags`` (bit 1: contact list full, 2: neighbour list or cell full, 4: non-finite state), step counter and
   contact-event counters.
 
 Leapfrog step (Wada et al. 2007 §4, eqs. 46-47; kick-drift-kick): half kick v += dt F/(2 m_1),
