@@ -337,3 +337,8 @@ def test_aggregates_denser_than_the_default_start_with_the_largest_packing():
     assert int(r.final_state.dem.active.sum()) >= 42
     with pytest.raises(JaxcoagInputError, match="give capacity >= 3"):
         contact.collide(hexa, contact.monomer(2), 0.5 * V0, MAT, t_end=20 * TC, capacity=2)
+    # the engine of the one verb sizes the list the same way
+    st = C.DEM()._init(MAT, C.Collision(hexa, contact.monomer(2), 0.5 * V0), 0.0, None, None).dem
+    assert st.ci.shape == (3 * 20,) and int(st.active.sum()) == 42 and int(st.flags) == 0
+    st = C.DEM()._init(MAT, C.Collision(contact.monomer(2), contact.monomer(2), 0.5 * V0), 0.0, None, None).dem
+    assert st.ci.shape == (2 * 2,)  # the default where it suffices

@@ -203,8 +203,9 @@ class DEM(AbstractEngine):
 
     Fields:
         dt: time step [s]; None: 0.014 t_c of the material (Wada et al. 2007 §4). Refused above 0.2 t_c.
-        capacity: contact slots per monomer (static; the contact list holds capacity x N contacts; default 2 in
-            2-D, 3 in 3-D).
+        capacity: contact slots per monomer (static; the contact list holds capacity x N contacts). None: 2 in 2-D
+            and 3 in 3-D (``dem.default_capacity``), or ``dem.max_capacity`` (3, 6) when the aggregates already
+            hold more contacts than that.
         neighbours: Verlet-list slots per monomer (static; default 8 in 2-D, 16 in 3-D).
         skin: Verlet skin in units of r1 (default 0.1).
         inelastic: static; inelastic sliding, rolling and twisting (eqs. 39-43). False: elastic springs only.
@@ -287,9 +288,19 @@ class DEM(AbstractEngine):
         if _is_concrete(initial.a.positions, initial.b.positions, initial.impact_parameter, kernel.r1):
             self._check_capacity(kernel, initial)
 
+    def _capacity(self, mat, coll):
+        """Slots per monomer of a new run: ``capacity``, or for None the default, raised to ``dem.max_capacity``
+        when the aggregates already hold more contacts than the default list (concrete positions only)."""
+        if self.capacity is not None:
+            return int(self.capacity)
+        K = _dem.default_capacity(coll.dim)
+        if _initial_contacts(coll, mat) > K * (coll.a.n + coll.b.n):
+            K = _dem.max_capacity(coll.dim)
+        return K
+
     def _check_capacity(self, mat, coll):
         """Refuse capacities whose contact list (capacity x N slots) cannot hold the initial contacts."""
-        K = int(self.capacity or _dem.default_capacity(coll.dim))
+        K = self._capacity(mat, coll)
         n_tot = coll.a.n + coll.b.n
         have = _initial_contacts(coll, mat)
         if have > K * n_tot:
@@ -302,8 +313,8 @@ class DEM(AbstractEngine):
             return initial.final_state
         r1 = kernel.r1
         x, v, r_g0 = _place(initial, r1)
-        st = _dem.init_state(x, v, 0.0, kernel, dim=initial.dim, capacity=self.capacity, neighbours=self.neighbours,
-                             skin=self.skin, t0=t0)
+        st = _dem.init_state(x, v, 0.0, kernel, dim=initial.dim, capacity=self._capacity(kernel, initial),
+                             neighbours=self.neighbours, skin=self.skin, t0=t0)
         na, nb = initial.a.n, initial.b.n
         v_imp = jnp.asarray(initial.v_imp, jnp.float64)
         E_imp = 0.5 * kernel.m1 * (na * nb / (na + nb)) * v_imp**2
