@@ -288,21 +288,22 @@ class DEM(AbstractEngine):
         if _is_concrete(initial.a.positions, initial.b.positions, initial.impact_parameter, kernel.r1):
             self._check_capacity(kernel, initial)
 
-    def _capacity(self, mat, coll):
+    def _capacity(self, mat, coll, have=None):
         """Slots per monomer of a new run: ``capacity``, or for None the default, raised to ``dem.max_capacity``
-        when the aggregates already hold more contacts than the default list (concrete positions only)."""
+        when the aggregates already hold more contacts than the default list (concrete positions only; ``have``:
+        their contact count if already known)."""
         if self.capacity is not None:
             return int(self.capacity)
         K = _dem.default_capacity(coll.dim)
-        if _initial_contacts(coll, mat) > K * (coll.a.n + coll.b.n):
+        if (_initial_contacts(coll, mat) if have is None else have) > K * (coll.a.n + coll.b.n):
             K = _dem.max_capacity(coll.dim)
         return K
 
     def _check_capacity(self, mat, coll):
         """Refuse capacities whose contact list (capacity x N slots) cannot hold the initial contacts."""
-        K = self._capacity(mat, coll)
         n_tot = coll.a.n + coll.b.n
         have = _initial_contacts(coll, mat)
+        K = self._capacity(mat, coll, have)
         if have > K * n_tot:
             need = -(-have // n_tot)
             raise JaxcoagInputError(f"DEM(capacity={K}) contact slots per monomer ({K * n_tot} in all) cannot hold the "
@@ -604,8 +605,8 @@ def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None
     if key is not None:
         coll = Collision(*_random_rotations(a, b, key), v_imp, impact_parameter, gap)
     auto = capacity is None
-    if auto and _initial_contacts(coll, material) > _dem.default_capacity(coll.dim) * (coll.a.n + coll.b.n):
-        capacity = _dem.max_capacity(coll.dim)
+    if auto:  # the default list, or max_capacity when the aggregates already need more (DEM._capacity)
+        capacity = DEM()._capacity(material, coll)
     engine = DEM(dt=dt, capacity=capacity, neighbours=neighbours, inelastic=bool(inelastic))
     if isinstance(quiet_steps, bool) or not isinstance(quiet_steps, (int, np.integer)) or quiet_steps < 0:
         raise JaxcoagInputError(f"quiet_steps must be an int >= 0; got {quiet_steps!r}.")
@@ -655,7 +656,7 @@ def collide(a, b, v_imp, material, *, impact_parameter=0.0, t_end=None, key=None
     if t_end is None and not end(res.final_state) and not bool(is_failure(res.status)):
         res = eqx.tree_at(lambda r: r.status, res, RESULTS.max_steps_reached)
     flags = int(res.final_state.dem.flags)
-    if auto and flags & _dem.FLAG_CONTACTS and int(capacity or 0) < _dem.max_capacity(coll.dim):
+    if auto and flags & _dem.FLAG_CONTACTS and capacity < _dem.max_capacity(coll.dim):
         big = _dem.max_capacity(coll.dim)
         warnings.warn(f"contact.collide: the contact list of {_dem.default_capacity(coll.dim)} slots per monomer "
                       f"overflowed at step {int(res.final_state.dem.step)}; rerunning the collision from the start "
