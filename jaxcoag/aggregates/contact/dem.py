@@ -271,13 +271,22 @@ def _gather(a, idx):
     return a[jnp.minimum(idx, a.shape[0] - 1)]
 
 
+def _pair_ends(xi, xj, active, r1):
+    """(xi, xj) with xj replaced, in empty slots, by a dummy at distance 2 r1 along x from xi (finite contact
+    geometry there, so that NaN never enters a masked lane or its gradient)."""
+    return xi, jnp.where(active[..., None], xj, xi - 2.0 * r1 * jnp.array([[1.0, 0.0, 0.0]]))
+
+
 def _safe_pairs(x, ci, cj, active, r1):
-    """Positions of the pair ends (C, 3) of the slots (ci, cj): monomer cj's, or a dummy at distance 2 r1 along x
-    from monomer ci for empty slots (finite contact geometry there, so that NaN never enters a masked lane or its
-    gradient)."""
-    xi = _gather(x, ci)
-    dummy = xi - 2.0 * r1 * jnp.array([[1.0, 0.0, 0.0]])
-    return xi, jnp.where(active[..., None], _gather(x, cj), dummy)
+    """Positions of the pair ends (C, 3) of the slots (ci, cj), with :func:`_pair_ends`'s dummy in empty slots."""
+    return _pair_ends(_gather(x, ci), _gather(x, cj), active, r1)
+
+
+def _half_work(Fc, Mc1, Mc2, gi, gj):
+    """Half the work of each contact's force and torques over a step, (1/2) [F.(dx_i - dx_j) + M_1.dth_i +
+    M_2.dth_j] [erg] (C,), from the step rows of its two monomers (columns 3:6 displacement dt v, 6:9 rotation
+    angle dt w; :func:`_step`): the leapfrog's half kick with a contact that exists at only one end of the step."""
+    return 0.5 * (_dot(Fc, gi[:, 3:6] - gj[:, 3:6]) + _dot(Mc1, gi[:, 6:9]) + _dot(Mc2, gj[:, 6:9]))
 
 
 def _unit(d):
@@ -315,13 +324,11 @@ def _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N):
     much as it saved (3-D 1024 + 1024, stop 29)."""
     ni, nj, ph = _safe_pointers(n_i, n_j, phi, active)
     cf = contact_forces(xi, xj, ni, nj, ph, mat)
-    F1, M1, M2 = cf.F1, cf.M1, cf.M2
-    Uc = jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1)
     a = active[..., None]
-    F1 = jnp.where(a, F1, 0.0)
-    M1 = jnp.where(a, M1, 0.0)
-    M2 = jnp.where(a, M2, 0.0)
-    Uc = jnp.where(a, Uc, 0.0)
+    F1 = jnp.where(a, cf.F1, 0.0)
+    M1 = jnp.where(a, cf.M1, 0.0)
+    M2 = jnp.where(a, cf.M2, 0.0)
+    Uc = jnp.where(a, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1), 0.0)
     FM = _pair_sum(jnp.concatenate([F1, M1], axis=-1), jnp.concatenate([-F1, M2], axis=-1), ci, cj, active, N)
     return FM[:, :3], FM[:, 3:], jnp.sum(Uc, axis=0), Uc, F1, M1, M2
 
@@ -503,10 +510,11 @@ def _clip(xi, xj, active, n_i, n_j, phi, mat):
 
     Only the contacts past a critical displacement (|zeta| > zeta_crit, |xi| > xi_crit or |phi_s| > phi_crit, the
     test of ``clip_inelastic``) change, so they are gathered into the smallest buffer of :func:`_clip_buffers` that
-    holds them, clipped there and scattered back; nothing runs when none is over its limit, and the whole list is clipped when more
-    than the buffer are (the branch is chosen by the largest count of a ``vmap`` batch). The other slots are
-    returned unchanged, as ``clip_inelastic`` itself returns them. Returns (n_i, n_j, phi, dE) with dE = (dE_s,
-    dE_r, dE_t) [erg] summed over the contacts. ``xi``, ``xj``: pair-end positions (C, 3) of :func:`_safe_pairs`.
+    holds them, clipped there and scattered back; nothing runs when none is over its limit, and the whole list is
+    clipped when more than the largest buffer are (the branch is chosen by the largest count of a ``vmap`` batch).
+    The other slots are returned unchanged, as ``clip_inelastic`` itself returns them. Returns (n_i, n_j, phi, dE)
+    with dE = (dE_s, dE_r, dE_t) [erg] summed over the contacts. ``xi``, ``xj``: pair-end positions (C, 3) of
+    :func:`_safe_pairs`.
     """
     L = active.shape[0]
     bufs = _clip_buffers(L)
@@ -614,12 +622,7 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     n_i = rotate_by(st.n_i, gi[:, 6:9], gi[:, 9], gi[:, 10])
     n_j = rotate_by(st.n_j, gj[:, 6:9], gj[:, 9], gj[:, 10])
     r1 = mat.r1
-    dummy = jnp.array([[2.0, 0.0, 0.0]]) * r1
-
-    def pair_ends(gi_, gj_, act):  # _safe_pairs from the gathered rows
-        return gi_[:, :3], jnp.where(act[:, None], gj_[:, :3], gi_[:, :3] - dummy)
-
-    xi, xj = pair_ends(gi, gj, active)
+    xi, xj = _pair_ends(gi[:, :3], gj[:, :3], active, r1)
     nc, dist = _unit(xi - xj)
     phi = jnp.where(active, st.phi + _dot(gi[:, 6:9] - gj[:, 6:9], nc), 0.0)
     E_dis = st.E_dis
@@ -640,8 +643,7 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         ci, cj = jnp.where(active, ci, N), jnp.where(active, cj, N)
         # energy ledger of a breaking (module docstring): the stored energies of the contact leave U; the
         # work of its last half kick, done in this step's first half kick, is part of the kinetic energy
-        wb = jnp.where(broken, 0.5 * (_dot(st.Fc, gi[:, 3:6] - gj[:, 3:6]) + _dot(st.Mc1, gi[:, 6:9])
-                                      + _dot(st.Mc2, gj[:, 6:9])), 0.0)
+        wb = jnp.where(broken, _half_work(st.Fc, st.Mc1, st.Mc2, gi, gj), 0.0)
         E_dis = E_dis + jnp.sum(jnp.where(broken[..., None], st.Uc, 0.0), axis=0) - jnp.zeros(4).at[0].set(
             jnp.sum(wb))
         cutoff = (2.0 + skin) * r1
@@ -676,7 +678,7 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         maybe_new = n_touch > n_touch_old
         ci, cj, active, n_i, n_j, phi, gi, gj, new, ovf_c = _cond_members(
             maybe_new, create, no_create, (ci, cj, active, n_i, n_j, phi, gi, gj))
-        xi, xj = pair_ends(gi, gj, active)
+        xi, xj = _pair_ends(gi[:, :3], gj[:, :3], active, r1)
         flags = flags | jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
         n_ev = (jnp.sum(broken) + jnp.sum(new)).astype(jnp.int64)
         if cfg.events:
@@ -698,7 +700,7 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N)
     if not cfg.freeze:
         # creation: U_n jumps from 0 to U_n(delta), and the second half kick does the new contact's work
-        wc = 0.5 * (_dot(Fc, gi[:, 3:6] - gj[:, 3:6]) + _dot(Mc1, gi[:, 6:9]) + _dot(Mc2, gj[:, 6:9]))
+        wc = _half_work(Fc, Mc1, Mc2, gi, gj)
         E_dis = E_dis.at[0].add(-jnp.sum(jnp.where(new, Uc[..., 0] + wc, 0.0)))
     v = v + (0.5 * dt / m1) * (F + Fe)
     w = w + (0.5 * dt / I1) * M
