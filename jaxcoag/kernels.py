@@ -29,6 +29,19 @@ from .physics.safe import safe_log
 __all__ = ["AbstractKernel", "Constant", "Sum", "Product", "PowerProduct", "PowerLaw"]
 
 
+def _logaddexp(a, b):
+    """ln(e^a + e^b) for NaN-free inputs (masses' logs), in the form XLA's CPU backend vectorises.
+
+    ``jnp.logaddexp`` guards against NaN with a select on ``a - b != a - b``, which keeps XLA-CPU
+    from vectorising the fused loop: 13 ns against 3.6 ns per entry on this form (measured on
+    (3, 65536) float64 tiles), and the Monte Carlo rate tiles evaluate one kernel per entry per event.
+    Equal arguments (also both -inf or both +inf) take d = 0, so the result is a + ln 2 (or the
+    infinity) instead of NaN; the derivative is 1/2 for each argument there, as for ``jnp.logaddexp``.
+    """
+    d = jnp.where(a == b, 0.0, a - b)
+    return jnp.maximum(a, b) + jnp.log1p(jnp.exp(-jnp.abs(d)))
+
+
 class AbstractKernel(eqx.Module):
     """Base class: a symmetric collision kernel K(m1, m2) [cm^3 s^-1].
 
@@ -111,7 +124,7 @@ class Sum(AbstractKernel):
         return self.b * (m1 + m2)
 
     def log_kernel_from_log_mass(self, logm1, logm2, x1=None, x2=None):
-        return jnp.log(self.b) + jnp.logaddexp(logm1, logm2)
+        return jnp.log(self.b) + _logaddexp(logm1, logm2)
 
     def log_kernel(self, m1, m2, x1=None, x2=None):
         return self.log_kernel_from_log_mass(jnp.log(m1), jnp.log(m2))
@@ -178,8 +191,7 @@ class PowerLaw(AbstractKernel):
         return jnp.exp(self.log_kernel(m1, m2))
 
     def log_kernel_from_log_mass(self, logm1, logm2, x1=None, x2=None):
-        return jnp.log(self.b) + jnp.logaddexp(self.mu * logm1 + self.nu * logm2,
-                                               self.nu * logm1 + self.mu * logm2)
+        return jnp.log(self.b) + _logaddexp(self.mu * logm1 + self.nu * logm2, self.nu * logm1 + self.mu * logm2)
 
     def log_kernel(self, m1, m2, x1=None, x2=None):
         return self.log_kernel_from_log_mass(jnp.log(m1), jnp.log(m2))

@@ -91,8 +91,7 @@ def test_blocked_incremental_update_after_events_equals_refresh():
 
     @jax.jit
     def event(st, a, b, key):
-        old = RUN._arrays(st)
-        st2, T, Tm = RUN._collide(cfg, P, st, a, b, key)
+        st2, T, Tm, old = RUN._collide(cfg, P, st, a, b, key)
         st2, _ = RUN._inc_update(cfg, P, old, st2, T, Tm)
         return st2
 
