@@ -671,38 +671,38 @@ def _event(cfg, p, st):
     snaps = st.snaps
     st = st._replace(snaps=None)
 
-    def do_event(st):
-        def go(st):
-            b = _pick_partner(cfg, p, st, a, u[3], u[4])
-            st2, T, Tm, old = _collide(cfg, p, st, a, b, kout)
-            st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm)
-            st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
-            need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
-            log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
-            st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp)
-            # maintenance triggers
-            rez = jnp.array(False)
-            if cfg.grouping == "equal_mass" and cfg.mode != "const_v":
-                rez = jnp.abs(log_mp - st2.zref) > 0.25 * LN2
-            elif cfg.grouping == "distribution":
-                rez = (jnp.abs(lmx - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
-            free = cfg.capacity - st2.ns
-            cap = free < cfg.n_prod + 2
-            if cfg.grouping == "equal_mass":
-                cap = cap | (cfg.capacity - free > _ns_hi_em(cfg, p["ns_target"]))
-            dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
-            st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
-            return _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
+    # every output time recorded: the run ends before this event. Folded into the one cond below: a second,
+    # nested cond with a pass-through branch made XLA copy the species arrays (S slots each) on every event
+    finished = proceed & (st.k_out >= cfg.n_snap)
 
-        return jax.lax.cond(st.k_out >= cfg.n_snap,
-                            lambda s: s._replace(done=jnp.array(True)), go, st)
+    def go(st):
+        b = _pick_partner(cfg, p, st, a, u[3], u[4])
+        st2, T, Tm, old = _collide(cfg, p, st, a, b, kout)
+        st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm)
+        st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
+        need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
+        log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
+        st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp)
+        # maintenance triggers
+        rez = jnp.array(False)
+        if cfg.grouping == "equal_mass" and cfg.mode != "const_v":
+            rez = jnp.abs(log_mp - st2.zref) > 0.25 * LN2
+        elif cfg.grouping == "distribution":
+            rez = (jnp.abs(lmx - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
+        free = cfg.capacity - st2.ns
+        cap = free < cfg.n_prod + 2
+        if cfg.grouping == "equal_mass":
+            cap = cap | (cfg.capacity - free > _ns_hi_em(cfg, p["ns_target"]))
+        dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
+        st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
+        return _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
 
-    def no_event(st):
+    def no_event(st):   # no event: the rate sum was not usable (or the run is finished, see above)
         st = _stop(st, nonfinite & fresh, STATUS.NONFINITE)
         st = _stop(st, zero & fresh, STATUS.ZERO_RATE)
-        return st._replace(dirty=st.dirty | ~fresh)
+        return st._replace(dirty=st.dirty | (~fresh & ~proceed), done=st.done | finished)
 
-    return jax.lax.cond(proceed, do_event, no_event, st)._replace(snaps=snaps)
+    return jax.lax.cond(proceed & ~finished, go, no_event, st)._replace(snaps=snaps)
 
 
 # ----------------------------------------------------------------------------- maintenance
