@@ -6,7 +6,8 @@ Checked here against the dense O(S^2) formulas of :mod:`jaxcoag.mc.rates` (Ormel
 5.31) on states with holes, several blocks and a clamped last block: the blocked refresh equals the
 dense row sums; the blocked incremental update after executed events equals a fresh refresh; the two
 blocked samplers draw with the probabilities of the dense weights (chi-square); and a run gives the
-same events at two capacities (the capacity no longer enters the per-event computation).
+same events at two capacities (the capacity no longer enters the per-event computation); and the event's
+write overlay (``run._Overlay``) behaves like the chain of single-slot updates it replaces.
 """
 
 import sys
@@ -182,3 +183,41 @@ def test_equal_mass_species_count_stays_within_2x_of_target(volume):
         g = np.asarray(r.w * 2.0 ** r.z)
         M = np.sum(np.where(np.asarray(r.valid), g * np.asarray(r.m), 0.0), axis=-1)
         np.testing.assert_allclose(M, 1e30, rtol=1e-12)
+
+
+def test_overlay_writes_equal_sequential_updates():
+    """``run._Overlay`` (the event's writes collected per array and applied as one scatter, so that XLA does not
+    copy the S-slot arrays) reads and writes like the chain of ``x = x.at[k].set(v)`` it replaces: reads see the
+    earlier writes, block reads too, repeated slots keep the last write; for float, int, bool and (S, P) arrays."""
+    rng = np.random.default_rng(7)
+    n_slots, P = 40, 2
+    bases = dict(f=rng.normal(size=n_slots), i=rng.integers(-5, 5, n_slots).astype(np.int32),
+                 b=rng.uniform(size=n_slots) < 0.5, p=rng.normal(size=(n_slots, P)))
+    slots = np.array([3, 17, 3, 39, 0, 17, 17, 25], np.int32)   # repeats, first and last slot
+
+    def new_value(name, v, q):
+        return ~v if name == "b" else v * 2 + q
+
+    @jax.jit
+    def with_overlay(bases, slots):
+        out, reads = {}, {}
+        for name, base in bases.items():
+            ov = RUN._Overlay(base)
+            rs = []
+            for q in range(slots.shape[0]):
+                v = ov[slots[q]]
+                rs.append(v)
+                ov.set(slots[q], new_value(name, v, q))
+            rs.append(ov.block(jnp.int32(0), n_slots))
+            reads[name] = rs
+            out[name] = ov.apply()
+        return out, reads
+
+    out, reads = with_overlay({k: jnp.asarray(v) for k, v in bases.items()}, jnp.asarray(slots))
+    for name, base in bases.items():
+        x = np.array(base)
+        for q, k in enumerate(slots):
+            np.testing.assert_array_equal(np.asarray(reads[name][q]), x[k])
+            x[k] = new_value(name, x[k], q)
+        np.testing.assert_array_equal(np.asarray(reads[name][-1]), x)
+        np.testing.assert_array_equal(np.asarray(out[name]), x)

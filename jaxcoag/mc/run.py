@@ -334,7 +334,8 @@ def _inc_update(cfg, p, old, st, T, Tmask):
     kernel K(m_t, m_b) is evaluated once and serves both the old and the new rate (a slot keeps
     its mass while it lives: donors and deduplicated products keep theirs, new products take a
     slot that was free before the event), so the per-entry work is one kernel value, two rate
-    formulas (arithmetic on ln K) and two exponentials. O(hi), independent of the capacity.
+    formulas (arithmetic on ln K) and two exponentials. O(hi) work (XLA still copies a few S-slot arrays
+    per event at the scatters, docs/design_notes.md).
 
     ``old`` (:class:`_Old`) holds the pre-event values of the slots T only; every other slot kept its
     values, so the old state of a block is the new one patched at T. (Passing the whole pre-event
