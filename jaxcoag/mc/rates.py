@@ -137,7 +137,7 @@ def log_rate_tile(logK, ia, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, val
     # phi = w/2 (all of it) at the rate ½ w (w - 1) C / phi (= (w - 1) C), see off-diagonal above
     lphi_aa = jnp.where(wa >= 2.0, 0.0, lwa - LN2)
     d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2 - lphi_aa, -jnp.inf)
-    # per-row values: the barrier keeps XLA from fusing (and so recomputing) their log/expm1 into every entry
+    # per-row values: the barrier makes XLA compute their log/expm1 once per row, not fused into every entry
     dg = jax.lax.optimization_barrier(jnp.where(za >= 1, d_grouped, d_single))
     diag = dg + logK
     out = jnp.where(ia[:, None] == ib[None, :], diag, off)

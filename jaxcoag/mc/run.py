@@ -309,13 +309,9 @@ class _Old(NamedTuple):
     valid: jax.Array
 
 
-def _old_at(st, k):
-    """``_Old`` of one slot k of the state st (scalars)."""
-    return _Old(st.logm[k], st.psi[k], st.w[k], st.z[k], st.valid[k])
-
-
-def _stack_old(olds):
-    return _Old(*(jnp.stack(f) for f in zip(*olds)))
+def _old_at(st, T):
+    """``_Old`` of the slots T (int array) of the state st."""
+    return _Old(st.logm[T], st.psi[T], st.w[T], st.z[T], st.valid[T])
 
 
 def _patch(x_b, idx, T, x_T):
@@ -338,9 +334,8 @@ def _inc_update(cfg, p, old, st, T, Tmask):
     per event at the scatters, docs/design_notes.md).
 
     ``old`` (:class:`_Old`) holds the pre-event values of the slots T only; every other slot kept its
-    values, so the old state of a block is the new one patched at T. (Passing the whole pre-event
-    arrays made XLA copy every species array, S slots each, on every event: the event cost grew
-    with the capacity, 239 -> 458 us at hi = 657 going from S = 8000 to 32000.)
+    values, so the old state of a block is the new one patched at T. (The whole pre-event arrays, kept
+    beside the new ones, made XLA copy every species array, S slots each, on every event.)
 
     Returns the updated state; also refreshes ``ns`` (valid slots) and, for the maintenance
     triggers, ``extras`` = (ln max m over valid slots, ln M1, ln M2) of the new state (−inf where
@@ -498,8 +493,7 @@ class _Overlay:
 
     Why: a chain of ``x = x.at[k].set(v)`` with reads of x between the writes made XLA copy the whole array
     (S slots) at every write that followed such a read, ~16 copies per event, so the cost per event grew with
-    the capacity (200 -> 424 us per event at 657 live species going from S = 8000 to 32000). One scatter after
-    all reads has no such conflict."""
+    the capacity (docs/design_notes.md). One scatter after all reads has no such conflict."""
 
     def __init__(self, base):
         self.base, self.idx, self.val = base, [], []
@@ -647,7 +641,7 @@ def _collide(cfg, p, st, a, b, key):
     nT = T.shape[0]
     dup = jnp.any((T[:, None] == T[None, :]) & (jnp.arange(nT)[None, :] < jnp.arange(nT)[:, None]) & Tm[None, :], axis=1)
     Tm = Tm & ~dup
-    old = _Old(logm.base[T], psi.base[T], w.base[T], z.base[T], valid.base[T])   # pre-event values
+    old = _old_at(st, T)   # pre-event values: st holds the arrays before the writes
     st = st._replace(m=m.apply(), logm=logm.apply(), psi=psi.apply(), w=w.apply(), z=z.apply(), valid=valid.apply(),
                      M_tot=M_tot, hi=hi)
     if cfg.leftover == "stochastic" and cfg.mode != "const_v":
@@ -666,7 +660,7 @@ def _duplicate(cfg, p, st, key, u0, log_mp):
     def dup(st, ub, ui):
         k, _ = _pick_blocked(cfg, st.hi, lambda start, idx: jnp.where(_sl(st.valid, start, Bc), _sl(st.w, start, Bc), 0.0),
                              ub, ui)
-        old = _stack_old([_old_at(st, k)])
+        old = _old_at(st, k[None])
         M_new = st.M_tot + jnp.ldexp(st.m[k], st.z[k])
         st2 = st._replace(w=st.w.at[k].add(1.0), M_tot=M_new,
                           logV=jnp.log(M_new) - st.log_rho_d, n_dup=st.n_dup + 1)
