@@ -314,12 +314,12 @@ def _old_at(st, T):
     return _Old(st.logm[T], st.psi[T], st.w[T], st.z[T], st.valid[T])
 
 
-def _patch(x_b, idx, T, x_T):
-    """Block values x_b of the slots idx with the entries of the touched slots T replaced by x_T (the
-    pre-event values): every slot outside T kept its values through the event."""
-    for q in range(T.shape[0]):
-        hit = idx == T[q]
-        x_b = jnp.where(hit[:, None] if x_b.ndim == 2 else hit, x_T[q], x_b)
+def _patch(x_b, idx, slots, values):
+    """Block values x_b (B,) or (B, P) of the slots idx with the entries of ``slots`` replaced by ``values``
+    (in order, so a later repeat of a slot wins); slots/values: arrays with a leading axis or sequences."""
+    for k, v in zip(slots, values):
+        hit = idx == k
+        x_b = jnp.where(hit[:, None] if x_b.ndim == 2 else hit, v, x_b)
     return x_b
 
 
@@ -511,12 +511,7 @@ class _Overlay:
 
     def block(self, start, B):
         """``_sl(x, start, B)`` of the written array."""
-        x = _sl(self.base, start, B)
-        idx = start + jnp.arange(B, dtype=jnp.int32)
-        for i_, v_ in zip(self.idx, self.val):
-            hit = idx == i_
-            x = jnp.where(hit[:, None] if x.ndim == 2 else hit, v_, x)
-        return x
+        return _patch(_sl(self.base, start, B), start + jnp.arange(B, dtype=jnp.int32), self.idx, self.val)
 
     def apply(self):
         if not self.idx:
