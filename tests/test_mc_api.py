@@ -298,3 +298,74 @@ def test_mc_and_binned_datasets_share_the_common_layout():
         assert float(r.mass_peak(grid.edges)[0]) == pytest.approx(1.0, rel=1e-12)
     # automatic MC edges (10 per decade) hold all the mass: M1 from the bins equals the moment M1 = rho_d
     np.testing.assert_allclose(np.asarray(rm.mass_per_bin()).sum(-1), np.asarray(rm.moments(1.0)), rtol=1e-13)
+
+
+def _scan_lengths(jaxpr):
+    """Lengths of every ``scan`` in a (closed) jaxpr, nested ones included."""
+    out = []
+    for eq in jaxpr.eqns:
+        if eq.primitive.name == "scan":
+            out.append(int(eq.params["length"]))
+        for v in eq.params.values():
+            for sub in (v if isinstance(v, (tuple, list)) else (v,)):
+                if isinstance(sub, jax.extend.core.ClosedJaxpr):
+                    out += _scan_lengths(sub.jaxpr)
+                elif isinstance(sub, jax.extend.core.Jaxpr):
+                    out += _scan_lengths(sub)
+    return out
+
+
+def _members_case():
+    eng = mc.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=30, f_eps=1e-2)
+    t_out = jnp.array([0.0, 1.0, 2.5])
+
+    def run(key, b):
+        return jc.evolve(K.Sum(b), eng, jc.Monodisperse(1.0, 1.0), t_out, key=key, throw=False)
+
+    return run, jax.random.split(jax.random.key(11), 3), jnp.array([0.5, 0.8, 1.2])
+
+
+def _assert_member_equals(res, ix, one):
+    for name in ("m", "w", "z", "valid", "M_tot", "logV", "n_events", "flags"):
+        np.testing.assert_array_equal(np.asarray(getattr(res, name))[ix], np.asarray(getattr(one, name)),
+                                      err_msg=f"{name} member {ix}")
+
+
+def test_vmapped_members_run_as_single_runs_on_cpu():
+    """Under jax.vmap on CPU the members run one after another (a lax.map over the batch, engine
+    ``_simulate_members``), each bit for bit its single run (over keys and a kernel parameter at once)."""
+    assert jax.default_backend() == "cpu"
+    run, keys, bs = _members_case()
+    # the batch of 3 becomes a scan of length 3 (the event loop itself has no scan)
+    assert 3 in _scan_lengths(jax.make_jaxpr(jax.vmap(run))(keys, bs).jaxpr)
+    assert 3 not in _scan_lengths(jax.make_jaxpr(run)(keys[0], bs[0]).jaxpr)
+    both = jax.jit(jax.vmap(run))(keys, bs)
+    for i in range(3):
+        _assert_member_equals(both, (i,), run(keys[i], bs[i]))
+    assert len({int(n) for n in np.asarray(both.n_events)}) == 3  # the members did differ
+
+
+@pytest.mark.slow
+def test_nested_vmap_members_equal_single_runs():
+    """vmap over keys inside vmap over the kernel parameter: every member (3 x 3) equals its single run."""
+    run, keys, bs = _members_case()
+    nested = jax.jit(jax.vmap(jax.vmap(run, in_axes=(0, None)), in_axes=(None, 0)))(keys, bs)
+    assert nested.m.shape[:2] == (3, 3)
+    for i in range(3):
+        for j in range(3):
+            _assert_member_equals(nested, (j, i), run(keys[i], bs[j]))
+
+
+def test_derivatives_through_a_run_are_zero_not_errors():
+    """The sampling is not differentiable: jax.grad of a program that contains a run gives zero derivatives
+    with respect to a kernel parameter (also under vmap, where the members run as single runs), not an error."""
+    eng = mc.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=20, f_eps=1e-2)
+    key = jax.random.key(2)
+
+    def f(b):
+        r = jc.evolve(K.Sum(b), eng, jc.Monodisperse(1.0, 1.0), jnp.array([0.0, 1.0]), key=key, throw=False)
+        return jnp.sum(jnp.where(r.valid[-1], r.m[-1] * r.w[-1], 0.0))
+
+    value, grad = jax.value_and_grad(f)(0.5)
+    assert float(grad) == 0.0 and float(value) > 0.0
+    np.testing.assert_array_equal(np.asarray(jax.vmap(jax.grad(f))(jnp.array([0.5, 0.7]))), 0.0)
