@@ -144,6 +144,13 @@ class AbstractEngine(eqx.Module):
     def _result(self, kernel, t, outs, state, outcome):
         """The engine's result from the concatenated outputs and the final state."""
 
+    def _progress_time(self, t: float) -> str:
+        """Simulated time ``t`` (in the run's time unit) as the progress bar shows it: years for the engines whose
+        times are in s and span astrophysical scales; engines with other units or scales override it."""
+        from .constants import yr
+
+        return f"t = {t / yr:.4g} yr"
+
 
 def _check_t_out(t_out, t0):
     """Output times as a float64 array: 1-D, non-empty, finite, strictly increasing, >= t0."""

@@ -517,7 +517,8 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
             to reproduce the uninterrupted checkpointed run bit for bit.
         resume: continue from ``checkpoint`` when it exists (refused, before any work, if it belongs
             to another run or is damaged); False starts afresh and overwrites it.
-        progress: a tqdm bar over the segments on stderr (simulated time in yr; engines with a
+        progress: a tqdm bar over the segments on stderr (simulated time as the engine's ``_progress_time``
+            writes it: in yr, in s for the contact DEM, in the box's units for rigid aggregates; engines with a
             ``_progress_info(state_before, state_after, out, wall_s) -> str`` method add their own
             figures, e.g. events per second).
         max_segments: advance at most this many new segments, then return the outputs so far
@@ -544,8 +545,6 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
         JaxcoagInputError for a checkpoint that cannot be resumed (see :func:`load`).
     """
     from tqdm.auto import tqdm
-
-    from .constants import yr
 
     t_np = np.asarray(t_out, np.float64)
     T = int(t_np.shape[0])
@@ -608,7 +607,8 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
                 write(rec)
             info_fn = getattr(engine, "_progress_info", None)
             extra = info_fn(prev, state, out, wall) if info_fn is not None else ""
-            bar.set_postfix_str(f"t = {t_np[hi - 1] / yr:.4g} yr" + (f", {extra}" if extra else ""), refresh=False)
+            bar.set_postfix_str(engine._progress_time(float(t_np[hi - 1])) + (f", {extra}" if extra else ""),
+                                refresh=False)
             bar.update(1)
             ended = until is not None and bool(until(state))
     except KeyboardInterrupt as e:

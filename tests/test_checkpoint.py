@@ -508,3 +508,42 @@ def test_nan_written_by_the_run_and_prng_keys_round_trip(tmp_path):
     assert np.signbit(np.asarray(ck["state"]["x"])[2])
     assert CK._is_key(ck["state"]["k"]) and str(jax.random.key_impl(ck["state"]["k"])) == "threefry2x32"
     assert float(jax.random.uniform(ck["state"]["k"])) == float(jax.random.uniform(jax.random.key(3)))
+
+
+class _Clock(jaxcoag._engine.AbstractEngine):
+    """A minimal engine (state: the segments done) whose progress time is in its own units."""
+
+    @property
+    def name(self):
+        return "clock"
+
+    def _check(self, kernel, initial, t_out, t0, outcome, key):
+        pass
+
+    def _init(self, kernel, initial, t0, outcome, key):
+        return jnp.zeros((), jnp.int32)
+
+    def _advance(self, kernel, state, t_seg, outcome):
+        return state + 1, {"status": jnp.zeros(t_seg.shape, jnp.int32), "t": t_seg}
+
+    def _result(self, kernel, t, outs, state, outcome):
+        return outs
+
+    def _progress_time(self, t):
+        return f"T = {t:.4g}"
+
+
+def test_progress_bar_time_in_each_engines_units(capsys):
+    """The progress bar writes the simulated time through the engine's _progress_time: years for the
+    coagulation engines (times in s), seconds for the contact DEM, the box's units for rigid aggregates."""
+    from jaxcoag.aggregates import contact, rigid
+    from jaxcoag.constants import yr
+
+    out = CK.run_segments(None, _Clock(), None, np.array([1.0, 2.0, 3.5]), t0=0.0, outcome=None, key=None,
+                          progress=True, desc="clock")
+    np.testing.assert_array_equal(np.asarray(out["t"]), [1.0, 2.0, 3.5])
+    err = capsys.readouterr().err
+    assert "T = 3.5" in err and " yr" not in err
+    assert mc.MonteCarlo(n_particles=10.0)._progress_time(2.0 * yr) == "t = 2 yr"
+    assert contact.DEM()._progress_time(3e-9) == "t = 3e-09 s"
+    assert rigid.RigidBox()._progress_time(8.2) == "T = 8.2"

@@ -332,6 +332,10 @@ class DEM(AbstractEngine):
         rec["status"] = _dem.flags_code(rec["flags"])
         return eqx.tree_at(lambda s: s.dem, state, st), rec
 
+    def _progress_time(self, t: float) -> str:
+        """Progress-bar time in s (a collision lasts nanoseconds to microseconds, not years)."""
+        return f"t = {t:.4g} s"
+
     def _progress_info(self, state_before, state_after, out, wall_s):
         """Progress-bar figures of one segment: steps per second and contacts."""
         n = int(state_after.dem.step) - int(state_before.dem.step)

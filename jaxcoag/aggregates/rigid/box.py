@@ -494,6 +494,10 @@ class RigidBox(AbstractEngine):
         return "rigid"
 
     # -------------------------------------------------------------------------------- protocol
+    def _progress_time(self, t: float) -> str:
+        """Progress-bar time in the box's own units (R95: arbitrary length and time units), not in years."""
+        return f"T = {t:.4g}"
+
     def _check(self, kernel, initial, t_out, t0, outcome, key):
         if kernel is not None:
             raise JaxcoagInputError("the rigid box simulates its collisions explicitly: pass kernel=None.")
