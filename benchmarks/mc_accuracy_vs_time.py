@@ -58,12 +58,11 @@ def coarse_l1(spec, ref):
     return C.rel_l1(np.bincount(idx, weights=spec), np.bincount(idx, weights=ref))
 
 
-def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=8):
+def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=None):
     """Run our grouped MC for ``seeds`` (list of ints); returns one dict per seed.
 
-    ``capacity`` = ``capacity_factor`` x Ns (the library default 8 x Ns for equal-mass; since
-    equal-mass runs merge mass neighbours above 0.9 S (thesis §5.2.1 merging) it no longer overflows
-    here; the earlier 16 x Ns doubled the O(S) per-event work).
+    ``capacity`` = ``capacity_factor`` x Ns, or None (the default): the library's default (4 Ns* for
+    equal-mass grouping, which merges mass neighbours above 2 Ns*).
     The first seed's time includes compilation (unless this Ns was compiled before: f_eps is
     a traced argument); its ``wall_s`` is None and ``compile_s`` = first time - its events x
     (seconds per event of the timed seeds), when a second seed exists.
@@ -74,7 +73,7 @@ def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=8):
     from jaxcoag.kernels import Sum
 
     engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), n_particles=N0 * VOLUME, ns_target=ns_target, f_eps=f_eps,
-                                capacity=int(capacity_factor * ns_target))
+                                capacity=None if capacity_factor is None else int(capacity_factor * ns_target))
     initial = jaxcoag.Monodisperse(M0, N0 * M0)
     refs = np.array([P.golovin_reference_dm_dlnr_monodisperse(t) for t in times])
     out = []
@@ -87,7 +86,7 @@ def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=8):
         l1c = coarse_l1(spec[-1], refs[-1])
         status = jaxcoag.status_names(r.status)
         out.append(dict(code="jaxcoag", ns_target=ns_target, f_eps=f_eps, seed=seed,
-                        capacity=int(capacity_factor * ns_target),
+                        capacity=int(r.m.shape[-1]),
                         first_call=(i == 0), time_s=tm.seconds, n_events=int(r.n_events),
                         n_merge=int(r.n_merge), n_dup=int(r.n_dup), status=status,
                         l1=l1, l1_final=l1[-1], l1_coarse_final=l1c, dm_dlnr=spec))
@@ -219,8 +218,8 @@ def main(argv=None):
     ap.add_argument("--nsd", default=None, help="comma list of log2(n_sd) for PySDM")
     ap.add_argument("--seeds", type=int, default=2, help="seeds per configuration (>= 2 to "
                     "separate compile time)")
-    ap.add_argument("--capacity-factor", type=float, default=8.0,
-                    help="species capacity = factor x Ns (default 8, the library default)")
+    ap.add_argument("--capacity-factor", type=float, default=None,
+                    help="species capacity = factor x Ns (default: the library's, 4 Ns* for equal mass)")
     ap.add_argument("--budget-s", type=float, default=1200.0,
                     help="skip our remaining configurations once this much time has passed")
     ap.add_argument("--no-peers", action="store_true")

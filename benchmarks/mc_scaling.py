@@ -11,14 +11,16 @@ Tables:
   * ``capacity``: Ns* = 100 at capacities 150 ... 12 800: the cost per event should not follow the
     capacity;
   * ``goal``: Fig. 5.4a set-up, Ns* = 2000 to t = 20 (issue 17: under 60 s after compile);
-  * ``ensemble``: 8 seeds, one ``jax.vmap``-ed call vs a Python loop of 8 jitted calls.
+  * ``ensemble``: 8 seeds, one ``jax.vmap``-ed call vs a Python loop of 8 jitted calls, at Ns* = 100 and 400
+    (on CPU the engine runs the members of a vmapped batch one after another: ``mc.engine._simulate_members``).
 ``--baseline PATH`` runs the ``ns`` and ``capacity`` tables with the jaxcoag checkout at PATH (a
 subprocess with ``PYTHONPATH=PATH``, same machine, same invocation) and reports new/baseline ratios of
 events/s.
 
-    python benchmarks/mc_scaling.py [--quick] [--baseline /path/to/old/checkout] [--skip goal,ensemble]
+    python benchmarks/mc_scaling.py [--quick] [--baseline /path/to/old/checkout] [--skip tables,goal,ensemble]
+        [--out PATH]
 
-Writes benchmarks/results/mc_scaling[_quick].json.
+Writes benchmarks/results/mc_scaling[_quick].json (or ``--out``).
 """
 
 import argparse
@@ -125,7 +127,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--baseline", default=None, help="jaxcoag checkout to run side by side (PYTHONPATH)")
-    ap.add_argument("--skip", default="", help="comma list of tables to skip: goal, ensemble")
+    ap.add_argument("--skip", default="", help="comma list of tables to skip: tables (the Ns and capacity tables), "
+                    "goal, ensemble")
+    ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/mc_scaling[_quick].json)")
     ap.add_argument("--baseline-max-ns", type=int, default=1000,
                     help="largest Ns* of the baseline's Ns table (the old O(capacity) engine is slow beyond)")
     ap.add_argument("--tables-only", default=None, help=argparse.SUPPRESS)
@@ -135,8 +139,10 @@ def main(argv=None):
             json.dump(dict(tables(args.quick, args.baseline_max_ns), jaxcoag_file=jaxcoag.__file__), fh, default=str)
         return None
     skip = set(filter(None, args.skip.split(",")))
-    base = run_baseline(args.baseline, args.quick, args.baseline_max_ns) if args.baseline else None
-    res = dict(benchmark="mc_scaling", quick=args.quick, machine=machine_info(), **tables(args.quick))
+    do_tables = "tables" not in skip
+    base = run_baseline(args.baseline, args.quick, args.baseline_max_ns) if args.baseline and do_tables else None
+    res = dict(benchmark="mc_scaling", quick=args.quick, machine=machine_info(),
+               **(tables(args.quick) if do_tables else {}))
     cols = ["ns", "t", "volume", "capacity", "events", "wall_s", "ev_per_s", "us_per_event", "first_call_s", "Ns_max",
             "Ns_end", "Ns_max_over_target", "merges", "status"]
     if base is not None:
@@ -146,16 +152,17 @@ def main(argv=None):
                 r["baseline_ev_per_s"] = b["ev_per_s"]
                 r["speedup_vs_baseline"] = r["ev_per_s"] / b["ev_per_s"]
         cols += ["baseline_ev_per_s", "speedup_vs_baseline"]
-    print_table(res["ns"], cols, "events/s vs Ns* (capacity 4 Ns*, t = 5)")
-    print_table(res["capacity"], cols, "events/s vs capacity (Ns* = 100)")
+    if do_tables:
+        print_table(res["ns"], cols, "events/s vs Ns* (capacity 4 Ns*, t = 5)")
+        print_table(res["capacity"], cols, "events/s vs capacity (Ns* = 100)")
     if not args.quick and "goal" not in skip:
         res["goal"] = [timed(2000, 20.0, const_ns=True)]
         print_table(res["goal"], cols[:-2] if base is not None else cols,
                     "goal: Fig. 5.4a set-up (const-Ns, equal mass), Ns* = 2000 to t = 20 (issue 17: < 60 s after compile)")
     if "ensemble" not in skip:
-        res["ensemble"] = [ensemble(tend=2.0 if args.quick else 5.0)]
+        res["ensemble"] = [ensemble(ns=ns, tend=2.0 if args.quick else 5.0) for ns in ((100,) if args.quick else (100, 400))]
         print_table(res["ensemble"], list(res["ensemble"][0]), "8-seed ensemble: vmap vs loop")
-    path = os.path.join(OUT, "mc_scaling" + ("_quick" if args.quick else "") + ".json")
+    path = args.out or os.path.join(OUT, "mc_scaling" + ("_quick" if args.quick else "") + ".json")
     write_json(path, res)
     print(f"wrote {path}")
     return res
