@@ -103,6 +103,13 @@ def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=None):
     return out
 
 
+def _as_list(status):
+    """A run's status as a list of names (``jaxcoag.status_names`` gives one name for a single run)."""
+    if status is None:
+        return []
+    return [status] if isinstance(status, str) else list(status)
+
+
 def summarize(rows, key_fields):
     """Mean L1 / wall / events per configuration; ensemble-mean L1 from the averaged spectra."""
     groups = {}
@@ -124,7 +131,7 @@ def summarize(rows, key_fields):
             events=float(np.mean(ev)) if ev else None,
             events_per_s=(float(np.mean(ev)) / wall) if (ev and wall) else None,
             compile_s=rs[0].get("compile_s"),
-            status=sorted({str(x) for r in rs for x in (r.get("status") or [])}) or ["OK"]))
+            status=sorted({str(x) for r in rs for x in _as_list(r.get("status"))}) or ["OK"]))
     return out
 
 
