@@ -65,9 +65,11 @@ cancel the impulse dt F_e of the configuration at which the other event step wou
 so the map from the parameters to the trajectory is continuous when an event moves by a step (positions too,
 not only the total impulse). Each impulse acts along the line of centres of the configuration where it is
 applied, equal and opposite on the two monomers: P and L are conserved to round-off and no torque is involved.
-The tangential springs are zero at creation; their forces and torques at breaking are not corrected. The work of
-the corrections, (1/2) Fe.dx in each half kick (``DEMState.Fe``), is booked in E_dis,n, so the ledger stays
-closed. The correction runs inside a ``lax.cond`` taken only on steps with an event or a pending correction.
+The tangential springs are zero at creation; at breaking their force and torques (sliding, rolling, twisting) stop
+at the same instant and get the same two corrections, F_t and M_1 of the last configuration in contact, with the
+torque on the second monomer set to -M_1 - (x_i - x_j) x F_t where it is applied (P and L exact; ``DEMState.Me``,
+``ev_t``). The work of the corrections, (1/2) (Fe.dx + Me.dth) in each half kick, is booked in E_dis,n, so the
+ledger stays closed. The correction runs inside a ``lax.cond`` taken only on steps with an event or a pending correction.
 
 Entry points: :func:`init_state` (contacts of every pair with delta >= 0), :func:`step`, :func:`integrate` (a
 fixed-length ``lax.scan`` over chunks of steps, each chunk under ``jax.checkpoint``: reverse-mode differentiable
@@ -104,7 +106,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._validate import JaxcoagInputError
-from .interactions import (_dot, _norm, clip_inelastic, contact_forces, contact_geometry, rotate_by,
+from .interactions import (_cross, _dot, _norm, clip_inelastic, contact_forces, contact_geometry, rotate_by,
                            rotation_coefficients)
 
 __all__ = ["DEMState", "init_state", "step", "integrate", "integrate_until", "diagnostics", "flags_code",
@@ -165,9 +167,13 @@ class DEMState(eqx.Module):
         E_dis: (4,) dissipated energies (normal, sliding, rolling, twisting) since the start [erg].
         Fe: (N, 3) event-time correction at ``x`` [dyn]: the correction impulses due at this configuration over dt
             (module docstring, "Event times"), applied with ``F`` in the two half kicks around ``x``.
+        Me: (N, 3) event-time correction of the torques at ``x`` [dyn cm] (tangential springs of broken contacts).
         ev_f, ev_i, ev_j: (2C,) correction due at the next configuration, per slot (breakings, then creations): the
             normal force on monomer ev_i [dyn] (impulse over dt, along n_c of that configuration; -ev_f on ev_j)
             and the pair (N = none).
+        ev_t: (C, 6) the tangential part of the correction due at the next configuration, per breaking slot (the
+            pairs of ev_i[:C], ev_j[:C]): force on ev_i [dyn] (-it on ev_j) and torque on ev_i [dyn cm] (the torque
+            on ev_j is set there so that the angular momentum is exact).
         axes: (dim,) bool, its length is the dimension of the run (2: planar, 3) and so a static shape.
         step: int64, steps taken since the start; t = t0 + step dt.
         t0: float64, time of the start [s].
@@ -198,9 +204,11 @@ class DEMState(eqx.Module):
     Mc2: jax.Array
     E_dis: jax.Array
     Fe: jax.Array
+    Me: jax.Array
     ev_f: jax.Array
     ev_i: jax.Array
     ev_j: jax.Array
+    ev_t: jax.Array
     axes: jax.Array
     step: jax.Array
     t0: jax.Array
@@ -449,7 +457,7 @@ def _compression(x, ci, cj, mask, r1):
     return 2.0 * r1 - dist
 
 
-def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, ev_j, mat):
+def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, ev_j, ev_t, Fc_old, Mc1_old, mat):
     """Event-time correction of the leapfrog (module docstring, "Event times").
 
     A contact created in this step (``new``, delta crossed 0) or broken (``broken``, delta crossed -delta_c)
@@ -459,10 +467,15 @@ def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, e
     configuration and dt F_e theta/2 (creation) or -dt F_e theta/2 (breaking) at the next one, each along the
     line of centres of the configuration where it is applied (equal and opposite on the two monomers, no
     torque). A breaking also gets (1 - theta) Z here and theta Z at the next configuration (the sqrt-cusp term
-    of the module docstring). ``ev_f``, ``ev_i``, ``ev_j`` are the corrections due here from the previous step.
+    of the module docstring). The tangential springs of a broken contact (its force minus the normal part, ``Fc_old``
+    on ci, and its torque on ci, ``Mc1_old``, at ``x_old``) stop at the same instant and get the same two corrections
+    (no cusp term); the torque on cj is -M_1 - (x_i - x_j) x F_t at the configuration where the correction is
+    applied, so that P and L stay exact. ``ev_f``, ``ev_i``, ``ev_j``, ``ev_t`` are the corrections due here from
+    the previous step.
 
-    Returns (Fe, ev_f_next, ev_i_next, ev_j_next): the correction force at ``x`` (N, 3) [dyn] (impulse over dt)
-    and the per slot normal forces [dyn] and pairs due at the next configuration (2C,).
+    Returns (Fe, Me, ev_f_next, ev_i_next, ev_j_next, ev_t_next): the correction force (N, 3) [dyn] and torque (N, 3)
+    [dyn cm] at ``x`` (impulses over dt), the per slot normal forces [dyn] and pairs due at the next configuration
+    (2C,) and the tangential forces and torques due there (C, 6).
     """
     N = x.shape[0]
     r1 = mat.r1
@@ -494,7 +507,25 @@ def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, e
                                  jnp.where(new, 0.5 * f_c * th_c, 0.0)])
     ev_i_next = jnp.concatenate([jnp.where(broken, ci_old, N), jnp.where(new, ci, N)]).astype(ev_i.dtype)
     ev_j_next = jnp.concatenate([jnp.where(broken, cj_old, N), jnp.where(new, cj, N)]).astype(ev_j.dtype)
-    return Fe, ev_f_next, ev_i_next, ev_j_next
+    # tangential springs of the broken contacts (and the previous step's pending ones, pairs ev_i[:C], ev_j[:C])
+    C = ci.shape[0]
+    xo_i, xo_j = _safe_pairs(x_old, ci_old, cj_old, broken, r1)
+    n_o, _ = _unit(xo_i - xo_j)
+    F_t = jnp.where(broken[:, None], Fc_old - _dot(Fc_old, n_o)[:, None] * n_o, 0.0)
+    M_t = jnp.where(broken[:, None], Mc1_old, 0.0)
+    a_now = jnp.where(broken, 0.5 * (3.0 * th_b - 1.0), 0.0)[:, None]
+    t_i = jnp.concatenate([jnp.where(broken, ci_old, N), ev_i[:C]])
+    t_j = jnp.concatenate([jnp.where(broken, cj_old, N), ev_j[:C]])
+    t_occ = t_i < N
+    tF = jnp.where(t_occ[:, None], jnp.concatenate([a_now * F_t, ev_t[:, :3]]), 0.0)
+    tM = jnp.where(t_occ[:, None], jnp.concatenate([a_now * M_t, ev_t[:, 3:]]), 0.0)
+    ti_x, tj_x = _safe_pairs(x, t_i, t_j, t_occ, r1)
+    tM2 = -tM - _cross(ti_x - tj_x, tF)
+    Fe = Fe + _pair_sum(tF, -tF, t_i, t_j, t_occ, N)
+    Me = _pair_sum(tM, tM2, t_i, t_j, t_occ, N)
+    a_next = jnp.where(broken, -0.5 * th_b, 0.0)[:, None]
+    ev_t_next = jnp.concatenate([a_next * F_t, a_next * M_t], axis=1)
+    return Fe, Me, ev_f_next, ev_i_next, ev_j_next, ev_t_next
 
 
 
@@ -595,7 +626,8 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
     none = jnp.full((2 * C,), N, jnp.int32)
     return DEMState(x=x, v=v, w=w, F=F, M=M, ci=ci, cj=cj, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
                     x_ref=x, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=jnp.zeros(4), Fe=jnp.zeros((N, 3)),
-                    ev_f=jnp.zeros((2 * C,)), ev_i=none, ev_j=none, axes=jnp.ones((dim,), bool),
+                    Me=jnp.zeros((N, 3)), ev_f=jnp.zeros((2 * C,)), ev_i=none, ev_j=none, ev_t=jnp.zeros((C, 6)),
+                    axes=jnp.ones((dim,), bool),
                     step=i64(0), t0=t0,
                     flags=flags.astype(jnp.int32), n_events=i64(0), first_event=i64(-1), last_event=i64(-1),
                     n_builds=i64(1))
@@ -611,7 +643,7 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     N = st.x.shape[0]
     m1, I1 = mat.m1, mat.I1
     v = st.v + (0.5 * dt / m1) * (st.F + st.Fe)
-    w = st.w + (0.5 * dt / I1) * st.M
+    w = st.w + (0.5 * dt / I1) * (st.M + st.Me)
     x = st.x + dt * v
     ci, cj, active = st.ci, st.cj, st.active
     # pointers rotate with their monomer (Rodrigues, ``interactions.rotate``): coefficients once per monomer
@@ -632,9 +664,9 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     new = jnp.zeros_like(active)
     # event times (module docstring): the correction applied at st.x did the work (1/2) Fe.dx in this step's first
     # half kick; corrections are made only by this step's events (else Fe = 0 and nothing is pending)
-    E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(st.Fe, v)))
-    Fe, ev_f, ev_i, ev_j = (jnp.zeros_like(st.Fe), jnp.zeros_like(st.ev_f), jnp.full_like(st.ev_i, N),
-                            jnp.full_like(st.ev_j, N))
+    E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(st.Fe, v) + _dot(st.Me, w)))
+    Fe, Me, ev_f, ev_i, ev_j, ev_t = (jnp.zeros_like(st.Fe), jnp.zeros_like(st.Me), jnp.zeros_like(st.ev_f),
+                                      jnp.full_like(st.ev_i, N), jnp.full_like(st.ev_j, N), jnp.zeros_like(st.ev_t))
     if not cfg.freeze:
         # breaking (Wada et al. 2007 §2.1): delta < -delta_c
         ci_old, cj_old = ci, cj
@@ -686,14 +718,14 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
             # (1/2) Fe.dx in this step's second half kick
             def correct(_):
                 return _event_impulses(st.x, x, ci_old, cj_old, broken, ci, cj, new, st.ev_f, st.ev_i, st.ev_j,
-                                       mat)
+                                       st.ev_t, st.Fc, st.Mc1, mat)
 
             def no_correct(_):
-                return Fe, ev_f, ev_i, ev_j
+                return Fe, Me, ev_f, ev_i, ev_j, ev_t
 
             pending = (n_ev > 0) | jnp.any(st.ev_i < N)
-            Fe, ev_f, ev_i, ev_j = _cond_members(pending, correct, no_correct, None)
-            E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(Fe, v)))
+            Fe, Me, ev_f, ev_i, ev_j, ev_t = _cond_members(pending, correct, no_correct, None)
+            E_dis = E_dis.at[0].add(-0.5 * dt * jnp.sum(_dot(Fe, v) + _dot(Me, w)))
     if cfg.inelastic:
         n_i, n_j, phi, dE = _clip(xi, xj, active, n_i, n_j, phi, mat)
         E_dis = E_dis + jnp.concatenate([jnp.zeros(1), dE])
@@ -703,12 +735,12 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         wc = _half_work(Fc, Mc1, Mc2, gi, gj)
         E_dis = E_dis.at[0].add(-jnp.sum(jnp.where(new, Uc[..., 0] + wc, 0.0)))
     v = v + (0.5 * dt / m1) * (F + Fe)
-    w = w + (0.5 * dt / I1) * M
+    w = w + (0.5 * dt / I1) * (M + Me)
     stp = st.step + 1
     event = n_ev > 0
     return DEMState(x=x, v=v, w=w, F=F, M=M, ci=ci, cj=cj, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
-                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, Fe=Fe, ev_f=ev_f, ev_i=ev_i,
-                    ev_j=ev_j, axes=st.axes, step=stp, t0=st.t0,
+                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, Fe=Fe, Me=Me, ev_f=ev_f,
+                    ev_i=ev_i, ev_j=ev_j, ev_t=ev_t, axes=st.axes, step=stp, t0=st.t0,
                     flags=flags, n_events=st.n_events + n_ev,
                     first_event=jnp.where(event & (st.first_event < 0), stp, st.first_event),
                     last_event=jnp.where(event, stp, st.last_event), n_builds=n_builds)
