@@ -160,7 +160,8 @@ def main(argv=None):
         print_table(res["goal"], cols[:-2] if base is not None else cols,
                     "goal: Fig. 5.4a set-up (const-Ns, equal mass), Ns* = 2000 to t = 20 (issue 17: < 60 s after compile)")
     if "ensemble" not in skip:
-        res["ensemble"] = [ensemble(ns=ns, tend=2.0 if args.quick else 5.0) for ns in ((100,) if args.quick else (100, 400))]
+        res["ensemble"] = [ensemble(ns=ns, tend=2.0 if args.quick else 5.0)
+                           for ns in ((100,) if args.quick else (100, 400))]
         print_table(res["ensemble"], list(res["ensemble"][0]), "8-seed ensemble: vmap vs loop")
     path = args.out or os.path.join(OUT, "mc_scaling" + ("_quick" if args.quick else "") + ".json")
     write_json(path, res)

@@ -69,7 +69,8 @@ The tangential springs are zero at creation; at breaking their force and torques
 at the same instant and get the same two corrections, F_t and M_1 of the last configuration in contact, with the
 torque on the second monomer set to -M_1 - (x_i - x_j) x F_t where it is applied (P and L exact; ``DEMState.Me``,
 ``ev_t``). The work of the corrections, (1/2) (Fe.dx + Me.dth) in each half kick, is booked in E_dis,n, so the
-ledger stays closed. The correction runs inside a ``lax.cond`` taken only on steps with an event or a pending correction.
+ledger stays closed. The correction runs inside a ``lax.cond`` taken only on steps with an event or a pending
+correction.
 
 Entry points: :func:`init_state` (contacts of every pair with delta >= 0), :func:`step`, :func:`integrate` (a
 fixed-length ``lax.scan`` over chunks of steps, each chunk under ``jax.checkpoint``: reverse-mode differentiable
@@ -480,7 +481,9 @@ def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, e
     N = x.shape[0]
     r1 = mat.r1
     # breaking: delta_old >= -delta_c > delta_new, theta = (delta_old + delta_c)/(delta_old - delta_new) in [0, 1)
-    dbo = _compression(x_old, ci_old, cj_old, broken, r1)
+    # (the line of centres before the step also serves the tangential correction below)
+    n_o, dist_o = _unit(jnp.subtract(*_safe_pairs(x_old, ci_old, cj_old, broken, r1)))
+    dbo = 2.0 * r1 - dist_o
     dbn = _compression(x, ci_old, cj_old, broken, r1)
     th_b = jnp.clip((dbo + mat.delta_c) / jnp.where(broken, dbo - dbn, 1.0), 0.0, 1.0)
     f_b = _F_AT_BREAKING * mat.F_c
@@ -499,8 +502,8 @@ def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, e
     i_now = jnp.concatenate([jnp.where(broken, ci_old, N), jnp.where(new, ci, N), ev_i])
     j_now = jnp.concatenate([jnp.where(broken, cj_old, N), jnp.where(new, cj, N), ev_j])
     occupied = i_now < N
-    xi, xj = _safe_pairs(x, i_now, j_now, occupied, r1)
-    nc, _ = _unit(xi - xj)
+    d_now = jnp.subtract(*_safe_pairs(x, i_now, j_now, occupied, r1))
+    nc, _ = _unit(d_now)
     J = jnp.where(occupied, f_now, 0.0)[..., None] * nc
     Fe = _pair_sum(J, -J, i_now, j_now, occupied, N)
     ev_f_next = jnp.concatenate([jnp.where(broken, -0.5 * f_b * th_b + th_b * z_b, 0.0),
@@ -509,18 +512,16 @@ def _event_impulses(x_old, x, ci_old, cj_old, broken, ci, cj, new, ev_f, ev_i, e
     ev_j_next = jnp.concatenate([jnp.where(broken, cj_old, N), jnp.where(new, cj, N)]).astype(ev_j.dtype)
     # tangential springs of the broken contacts (and the previous step's pending ones, pairs ev_i[:C], ev_j[:C])
     C = ci.shape[0]
-    xo_i, xo_j = _safe_pairs(x_old, ci_old, cj_old, broken, r1)
-    n_o, _ = _unit(xo_i - xo_j)
     F_t = jnp.where(broken[:, None], Fc_old - _dot(Fc_old, n_o)[:, None] * n_o, 0.0)
     M_t = jnp.where(broken[:, None], Mc1_old, 0.0)
     a_now = jnp.where(broken, 0.5 * (3.0 * th_b - 1.0), 0.0)[:, None]
-    t_i = jnp.concatenate([jnp.where(broken, ci_old, N), ev_i[:C]])
-    t_j = jnp.concatenate([jnp.where(broken, cj_old, N), ev_j[:C]])
+    # these pairs are the entries [0, C) (breakings) and [2C, 3C) (pending breakings) of i_now / j_now above
+    t_i = jnp.concatenate([i_now[:C], i_now[2 * C:3 * C]])
+    t_j = jnp.concatenate([j_now[:C], j_now[2 * C:3 * C]])
     t_occ = t_i < N
     tF = jnp.where(t_occ[:, None], jnp.concatenate([a_now * F_t, ev_t[:, :3]]), 0.0)
     tM = jnp.where(t_occ[:, None], jnp.concatenate([a_now * M_t, ev_t[:, 3:]]), 0.0)
-    ti_x, tj_x = _safe_pairs(x, t_i, t_j, t_occ, r1)
-    tM2 = -tM - _cross(ti_x - tj_x, tF)
+    tM2 = -tM - _cross(jnp.concatenate([d_now[:C], d_now[2 * C:3 * C]]), tF)
     Fe = Fe + _pair_sum(tF, -tF, t_i, t_j, t_occ, N)
     Me = _pair_sum(tM, tM2, t_i, t_j, t_occ, N)
     a_next = jnp.where(broken, -0.5 * th_b, 0.0)[:, None]
