@@ -309,11 +309,6 @@ class _Old(NamedTuple):
     valid: jax.Array
 
 
-def _old_at(st, T):
-    """``_Old`` of the slots T (int array) of the state st."""
-    return _Old(st.logm[T], st.psi[T], st.w[T], st.z[T], st.valid[T])
-
-
 def _patch(x_b, idx, slots, values):
     """Block values x_b (B,) or (B, P) of the slots idx with the entries of ``slots`` replaced by ``values``
     (in order, so a later repeat of a slot wins); slots/values: arrays with a leading axis or sequences."""
@@ -323,7 +318,7 @@ def _patch(x_b, idx, slots, values):
     return x_b
 
 
-def _inc_update(cfg, p, old, st, T, Tmask):
+def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     """Incremental row-sum update for the touched slots T (rate design B, docs/design_notes.md).
 
     One blocked pass over the active prefix [0, hi): for every touched slot t and every slot b the
@@ -336,6 +331,8 @@ def _inc_update(cfg, p, old, st, T, Tmask):
     ``old`` (:class:`_Old`) holds the pre-event values of the slots T only; every other slot kept its
     values, so the old state of a block is the new one patched at T. (The whole pre-event arrays, kept
     beside the new ones, made XLA copy every species array, S slots each, on every event.)
+
+    Where ``do`` is False, R is left as it was (the caller discards the scalar results).
 
     Returns the updated state; also refreshes ``ns`` (valid slots) and, for the maintenance
     triggers, ``extras`` = (ln max m over valid slots, ln M1, ln M2) of the new state (−inf where
@@ -383,7 +380,7 @@ def _inc_update(cfg, p, old, st, T, Tmask):
         en = jnp.where(Tmask[:, None], en_all, 0.0)
         # R is read here only by its own update (same slots): any other reader of R in this loop (the
         # checks below used to be here) made XLA copy R, all S slots, twice per block
-        delta = jnp.where(fresh, jnp.sum(en - eo, axis=0), 0.0)
+        delta = jnp.where(fresh & do, jnp.sum(en - eo, axis=0), 0.0)
         R = jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) + delta, start, axis=0)
         rowsum = rowsum + jnp.sum(en_all, axis=1)
         lmax = jnp.maximum(lmax, jnp.max(Ln))
@@ -399,10 +396,12 @@ def _inc_update(cfg, p, old, st, T, Tmask):
 
     init = (st.R, jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0, jnp.int32), ninf, ninf, ninf)
     R, rowsum, lmax, ns, lmx, l1, l2 = _fold(cfg, st.hi, body, init)
-    R = R.at[T].set(rowsum)
+    R = R.at[jnp.where(do, T, cfg.capacity)].set(rowsum, mode="drop")
 
-    # round-off check over the updated slots outside T (read only), then the clamp of the round-off
-    # negatives (R read only by its own update): two cheap passes in blocks of 4B
+    # round-off check over the updated slots outside T (read only), then the clamp of the round-off negatives
+    # (R read only by its own update), in blocks of 4B. The clamp pass runs only where the check found a
+    # negative entry (the rest is then unchanged): besides saving the pass, this orders the check's reads of R
+    # before the clamp's writes; unordered, XLA copied R (S slots) on every event
     Bc = _B(cfg, True)
 
     def check(k, start, idx, fresh, c):
@@ -418,7 +417,7 @@ def _inc_update(cfg, p, old, st, T, Tmask):
         Rb = _sl(R, start, Bc)
         return jax.lax.dynamic_update_slice_in_dim(R, jnp.where(fresh, jnp.maximum(Rb, 0.0), Rb), start, axis=0)
 
-    R = _fold(cfg, st.hi, clamp, R, cheap=True)
+    R = _fold(cfg, jnp.where(do & (rmin < 0), st.hi, 0), clamp, R, cheap=True)
     tot = tot + jnp.sum(jnp.where(jnp.isfinite(rowsum), rowsum, 0.0))
     neg = rmin < -1e-9 * tot
     over = lmax - s > 600.0
@@ -487,9 +486,53 @@ def _fold_leftovers(p, prods, phi, zp, m, logm, w, z, i, j, same):
     return _Folded(prods._replace(m=mq, logm=lmq, count=cnt), jnp.stack(folded))
 
 
+def _opaque_reads(f, arrays, *args):
+    """``(arrays, f(arrays, *args))``, with ``f`` run inside a one-trip ``lax.while_loop`` that passes the
+    (large) arrays through unchanged; the trip count is a runtime value, so XLA keeps the loop.
+
+    Why: XLA updates an array in place only if every computation that reads the old array comes before the
+    update in data-dependence order. An event reads slots of one species array to compute the new values of
+    another (``valid[slot]`` decides the new ``w``; the pre-event values feed the rate update), and XLA fuses
+    such a read into each of its consumers, so some reader was always unordered with some update: XLA then
+    copied the arrays, S slots each, on every event (7 copies; 37 of the 91 us per event at capacity 12 800 in
+    benchmarks/mc_scaling.py, an order of magnitude at capacity 80 000). Neither an optimization barrier nor
+    writing the read values back through the same scatter ordered them on CPU. A loop is not fused: here
+    every read of the arrays happens inside it, and the scatters update the loop's outputs, of which the
+    loop is the only other reader. Returns the arrays as the loop passed them (use these, not the inputs)."""
+    out0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype),
+                                  jax.eval_shape(lambda a, x: f(a, *x), arrays, args))
+    # args[0] >= 0 (a slot count): XLA cannot prove it, so it can neither unroll the loop (one trip) nor hoist
+    # the reads out of it (the scalar arguments are shifted by the trip counter where args[0] < 0, i.e. never)
+    neg = args[0] < 0
+    n_trips = jnp.int32(1) + neg.astype(jnp.int32)
+
+    def body(c):
+        k, arr, _ = c
+        x = tuple(v + jnp.where(neg, k, 0).astype(v.dtype) if (jnp.ndim(v) == 0 and jnp.issubdtype(v.dtype, jnp.number))
+                  else v for v in args)
+        return k + 1, arr, f(arr, *x)
+
+    _, arrays, out = jax.lax.while_loop(lambda c: c[0] < n_trips, body, (jnp.int32(0), arrays, out0))
+    return arrays, out
+
+
+def _scatter_writes(base, idx, val, do=True):
+    """``base`` with the single-slot writes (idx[k], val[k]) applied in order (a later write to a slot wins),
+    as one scatter; none where ``do`` is False."""
+    if not idx:
+        return base
+    I, V = jnp.stack(idx), jnp.stack(val)
+    n, S = I.shape[0], base.shape[0]
+    ar = jnp.arange(n, dtype=jnp.int32)
+    later = jnp.any((I[None, :] == I[:, None]) & (ar[None, :] > ar[:, None]), axis=1)   # overwritten later
+    I = jnp.where(later | ~jnp.asarray(do), S + ar, I)   # distinct out-of-range indices: dropped
+    return base.at[I].set(V, mode="drop", unique_indices=True)
+
+
 class _Overlay:
-    """Pending single-slot writes to one species array (trace-time helper of :func:`_collide`): reads (``x[k]``,
-    :meth:`block`) see the writes made so far, :meth:`apply` performs them as one scatter.
+    """Pending single-slot writes to one species array (trace-time helper of :func:`_collide_reads`): reads
+    (``x[k]``, :meth:`block`) see the writes made so far; :func:`_collide` performs them as one scatter
+    (:func:`_scatter_writes`).
 
     Why: a chain of ``x = x.at[k].set(v)`` with reads of x between the writes made XLA copy the whole array
     (S slots) at every write that followed such a read, ~16 copies per event, so the cost per event grew with
@@ -513,21 +556,27 @@ class _Overlay:
         """``_sl(x, start, B)`` of the written array."""
         return _patch(_sl(self.base, start, B), start + jnp.arange(B, dtype=jnp.int32), self.idx, self.val)
 
-    def apply(self):
-        if not self.idx:
-            return self.base
-        I, V = jnp.stack(self.idx), jnp.stack(self.val)
-        n, S = I.shape[0], self.base.shape[0]
-        ar = jnp.arange(n, dtype=jnp.int32)
-        later = jnp.any((I[None, :] == I[:, None]) & (ar[None, :] > ar[:, None]), axis=1)   # overwritten later
-        I = jnp.where(later, S + ar, I)   # distinct out-of-range indices: dropped
-        return self.base.at[I].set(V, mode="drop", unique_indices=True)
 
-
-def _collide(cfg, p, st, a, b, key):
+def _collide(cfg, p, st, a, b, key, do=True):
     """Execute one (group) event on the species pair {a, b}; returns (state, T, Tmask, old), with ``old``
-    (:class:`_Old`) the pre-event values of the touched slots T."""
-    m, logm, psi, w, z, valid = (_Overlay(x) for x in _arrays(st))
+    (:class:`_Old`) the pre-event values of the touched slots T. All reads run in :func:`_opaque_reads`,
+    then one scatter per species array applies the writes (none where ``do`` is False: the caller then
+    discards the scalar results)."""
+    names = ("m", "logm", "psi", "w", "z", "valid")
+    arrays, (writes, T, Tm, old, M_tot, hi) = _opaque_reads(
+        lambda arrs, hi_, a_, b_, key_: _collide_reads(cfg, p, st, arrs, a_, b_, key_), _arrays(st), st.hi, a, b, key)
+    st = st._replace(**{k: _scatter_writes(x, list(i_), list(v_), do) for k, x, (i_, v_) in zip(names, arrays, writes)},
+                     M_tot=M_tot, hi=hi)
+    if cfg.leftover == "stochastic" and cfg.mode != "const_v":
+        st = st._replace(logV=jnp.log(M_tot) - st.log_rho_d)
+    return st, T, Tm, old
+
+
+def _collide_reads(cfg, p, st, arrays, a, b, key):
+    """The read part of :func:`_collide`: from the species ``arrays`` (as passed by :func:`_opaque_reads`; the
+    scalar fields of st are read from st) compute the pending writes of every array, T, Tmask, the pre-event
+    values at T, M_tot and hi."""
+    m, logm, psi, w, z, valid = (_Overlay(x) for x in arrays)
     same = a == b
     za, zb = z[a], z[b]
     a_is_i = (za < zb) | ((za == zb) & ((logm[a] > logm[b]) | ((logm[a] == logm[b]) & (a <= b))))
@@ -636,15 +685,12 @@ def _collide(cfg, p, st, a, b, key):
     nT = T.shape[0]
     dup = jnp.any((T[:, None] == T[None, :]) & (jnp.arange(nT)[None, :] < jnp.arange(nT)[:, None]) & Tm[None, :], axis=1)
     Tm = Tm & ~dup
-    old = _old_at(st, T)   # pre-event values: st holds the arrays before the writes
-    st = st._replace(m=m.apply(), logm=logm.apply(), psi=psi.apply(), w=w.apply(), z=z.apply(), valid=valid.apply(),
-                     M_tot=M_tot, hi=hi)
-    if cfg.leftover == "stochastic" and cfg.mode != "const_v":
-        st = st._replace(logV=jnp.log(M_tot) - st.log_rho_d)
-    return st, T, Tm, old
+    old = _Old(logm.base[T], psi.base[T], w.base[T], z.base[T], valid.base[T])   # pre-event values
+    writes = tuple((tuple(o.idx), tuple(o.val)) for o in (m, logm, psi, w, z, valid))
+    return writes, T, Tm, old, M_tot, hi
 
 
-def _duplicate(cfg, p, st, key, u0, log_mp):
+def _duplicate(cfg, p, st, key, u0, log_mp, do=True):
     """Duplication controller (const_n: one group per event; const_ns: thesis §5.3.1, ch. 6).
 
     ``u0``: the two uniforms (block, slot) of the first duplication."""
@@ -652,14 +698,21 @@ def _duplicate(cfg, p, st, key, u0, log_mp):
         return st
     Bc = _B(cfg, True)
 
-    def dup(st, ub, ui):
-        k, _ = _pick_blocked(cfg, st.hi, lambda start, idx: jnp.where(_sl(st.valid, start, Bc), _sl(st.w, start, Bc), 0.0),
+    def reads(arrs, ns, hi, ub, ui):   # run in _opaque_reads (see there)
+        m, logm, psi, w, z, valid = arrs
+        k, _ = _pick_blocked(cfg, hi, lambda start, idx: jnp.where(_sl(valid, start, Bc), _sl(w, start, Bc), 0.0),
                              ub, ui)
-        old = _old_at(st, k[None])
-        M_new = st.M_tot + jnp.ldexp(st.m[k], st.z[k])
-        st2 = st._replace(w=st.w.at[k].add(1.0), M_tot=M_new,
+        return k, _Old(logm[k[None]], psi[k[None]], w[k[None]], z[k[None]], valid[k[None]]), jnp.ldexp(m[k], z[k])
+
+    def dup(st, ub, ui):
+        # ns (from the last rate update) first: the reads of that update come before this write of w
+        arrs, (k, old, mk) = _opaque_reads(reads, _arrays(st), st.ns, st.hi, ub, ui)
+        m, logm, psi, w, z, valid = arrs
+        M_new = st.M_tot + mk
+        w = w.at[jnp.where(do, k, cfg.capacity)].set(old.w[0] + 1.0, mode="drop")
+        st2 = st._replace(m=m, logm=logm, psi=psi, w=w, z=z, valid=valid, M_tot=M_new,
                           logV=jnp.log(M_new) - st.log_rho_d, n_dup=st.n_dup + 1)
-        return _inc_update(cfg, p, old, st2, k[None], jnp.ones((1,), bool))[0]
+        return _inc_update(cfg, p, old, st2, k[None], jnp.ones((1,), bool), do)[0]
 
     if cfg.mode == "const_n":
         return dup(st, u0[0], u0[1])
@@ -673,9 +726,9 @@ def _duplicate(cfg, p, st, key, u0, log_mp):
     if cfg.controller == "mass":
         def cond(c):
             st_, d = c
-            return (st_.M_tot < p["ns_target"] * jnp.exp(log_mp)) & (d < cfg.d_max)
+            return do & (st_.M_tot < p["ns_target"] * jnp.exp(log_mp)) & (d < cfg.d_max)
     else:
-        nd = jnp.where(st.ns < p["ns_target"], cfg.d_up, 0)
+        nd = jnp.where(do & (st.ns < p["ns_target"]), cfg.d_up, 0)
 
         def cond(c):
             return c[1] < nd
@@ -712,34 +765,41 @@ def _event(cfg, p, st):
     # nested cond with a pass-through branch made XLA copy the species arrays (S slots each) on every event
     finished = proceed & (st.k_out >= cfg.n_snap)
 
-    def go(st):
-        b = _pick_partner(cfg, p, st, a, u[3], u[4])
-        st2, T, Tm, old = _collide(cfg, p, st, a, b, kout)
-        st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm)
-        st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
-        need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
-        log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
-        st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp)
-        # maintenance triggers
-        rez = jnp.array(False)
-        if cfg.grouping == "equal_mass" and cfg.mode != "const_v":
-            rez = jnp.abs(log_mp - st2.zref) > 0.25 * LN2
-        elif cfg.grouping == "distribution":
-            rez = (jnp.abs(lmx - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
-        free = cfg.capacity - st2.ns
-        cap = free < cfg.n_prod + 2
-        if cfg.grouping == "equal_mass":
-            cap = cap | (cfg.capacity - free > _ns_hi_em(cfg, p["ns_target"]))
-        dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
-        st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
-        return _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
+    do = proceed & ~finished
 
-    def no_event(st):   # no event: the rate sum was not usable (or the run is finished, see above)
-        st = _stop(st, nonfinite & fresh, STATUS.NONFINITE)
-        st = _stop(st, zero & fresh, STATUS.ZERO_RATE)
-        return st._replace(dirty=st.dirty | (~fresh & ~proceed), done=st.done | finished)
+    # the event, its writes masked by ``do``, without a lax.cond: XLA did not update the species arrays in place
+    # inside a cond branch (it copied four of them in and out of the branch, S slots each, on every event)
+    b = _pick_partner(cfg, p, st, a, u[3], u[4])
+    st2, T, Tm, old = _collide(cfg, p, st, a, b, kout, do)
+    st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm, do)
+    st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
+    need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
+    log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
+    st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp, do)
+    # maintenance triggers
+    rez = jnp.array(False)
+    if cfg.grouping == "equal_mass" and cfg.mode != "const_v":
+        rez = jnp.abs(log_mp - st2.zref) > 0.25 * LN2
+    elif cfg.grouping == "distribution":
+        rez = (jnp.abs(lmx - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
+    free = cfg.capacity - st2.ns
+    cap = free < cfg.n_prod + 2
+    if cfg.grouping == "equal_mass":
+        cap = cap | (cfg.capacity - free > _ns_hi_em(cfg, p["ns_target"]))
+    dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
+    st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
+    st2 = _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
 
-    return jax.lax.cond(proceed & ~finished, go, no_event, st)._replace(snaps=snaps)
+    # no event: the rate sum was not usable (or the run is finished, see above)
+    st1 = _stop(st, nonfinite & fresh, STATUS.NONFINITE)
+    st1 = _stop(st1, zero & fresh, STATUS.ZERO_RATE)
+    st1 = st1._replace(dirty=st1.dirty | (~fresh & ~proceed), done=st1.done | finished)
+
+    big = ("m", "logm", "psi", "w", "z", "valid", "R")   # already masked by do
+    out = {k: (getattr(st2, k) if k in big else jax.tree_util.tree_map(lambda x2, x1: jnp.where(do, x2, x1),
+                                                                       getattr(st2, k), getattr(st1, k)))
+           for k in st._fields if k != "snaps"}
+    return MCState(**out, snaps=snaps)
 
 
 # ----------------------------------------------------------------------------- maintenance
