@@ -106,7 +106,7 @@ def ensemble(ns=100, tend=5.0, n_seeds=8):
 def tables(quick, max_ns=None):
     ns_grid = (50, 100) if quick else (50, 100, 200, 400, 1000, 2000)
     ns_grid = tuple(n for n in ns_grid if max_ns is None or n <= max_ns)
-    caps = (150, 800) if quick else (150, 800, 3200, 12800)
+    caps = (150, 800) if quick else (150, 800, 3200, 12800, 51200)
     return dict(ns=[timed(ns, 2.0 if quick else 5.0) for ns in ns_grid],
                 capacity=[timed(100, 2.0 if quick else 5.0, capacity=c) for c in caps])
 

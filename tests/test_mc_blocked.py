@@ -211,8 +211,9 @@ def test_overlay_writes_equal_sequential_updates():
                 ov.set(slots[q], new_value(name, v, q))
             rs.append(ov.block(jnp.int32(0), n_slots))
             reads[name] = rs
-            out[name] = RUN._scatter_writes(ov.base, ov.idx, ov.val)
-            out[name + "_masked"] = RUN._scatter_writes(ov.base, ov.idx, ov.val, jnp.array(False))
+            iv = RUN._stack_writes(ov.idx, ov.val, n_slots)
+            out[name] = RUN._scatter_writes(ov.base, iv)
+            out[name + "_masked"] = RUN._scatter_writes(ov.base, iv, jnp.array(False))
         return out, reads
 
     out, reads = with_overlay({k: jnp.asarray(v) for k, v in bases.items()}, jnp.asarray(slots))

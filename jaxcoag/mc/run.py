@@ -516,16 +516,23 @@ def _opaque_reads(f, arrays, *args):
     return arrays, out
 
 
-def _scatter_writes(base, idx, val, do=True):
-    """``base`` with the single-slot writes (idx[k], val[k]) applied in order (a later write to a slot wins),
-    as one scatter; none where ``do`` is False."""
-    if not idx:
-        return base
+def _stack_writes(idx, val, S):
+    """The single-slot writes (idx[k], val[k]), in order, as one (I, V) pair for a scatter: an entry that a later
+    write to the same slot overrides gets a distinct out-of-range index (dropped by the scatter)."""
     I, V = jnp.stack(idx), jnp.stack(val)
-    n, S = I.shape[0], base.shape[0]
-    ar = jnp.arange(n, dtype=jnp.int32)
+    ar = jnp.arange(I.shape[0], dtype=jnp.int32)
     later = jnp.any((I[None, :] == I[:, None]) & (ar[None, :] > ar[:, None]), axis=1)   # overwritten later
-    I = jnp.where(later | ~jnp.asarray(do), S + ar, I)   # distinct out-of-range indices: dropped
+    return jnp.where(later, S + ar, I), V
+
+
+def _scatter_writes(base, IV, do=True):
+    """``base`` with the writes ``IV`` = (I, V) of :func:`_stack_writes` applied as one scatter; none where
+    ``do`` is False."""
+    if IV is None:
+        return base
+    I, V = IV
+    S = base.shape[0]
+    I = jnp.where(do, I, S + jnp.arange(I.shape[0], dtype=jnp.int32))   # distinct out-of-range indices: dropped
     return base.at[I].set(V, mode="drop", unique_indices=True)
 
 
@@ -565,7 +572,7 @@ def _collide(cfg, p, st, a, b, key, do=True):
     names = ("m", "logm", "psi", "w", "z", "valid")
     arrays, (writes, T, Tm, old, M_tot, hi) = _opaque_reads(
         lambda arrs, hi_, a_, b_, key_: _collide_reads(cfg, p, st, arrs, a_, b_, key_), _arrays(st), st.hi, a, b, key)
-    st = st._replace(**{k: _scatter_writes(x, list(i_), list(v_), do) for k, x, (i_, v_) in zip(names, arrays, writes)},
+    st = st._replace(**{k: _scatter_writes(x, iv, do) for k, x, iv in zip(names, arrays, writes)},
                      M_tot=M_tot, hi=hi)
     if cfg.leftover == "stochastic" and cfg.mode != "const_v":
         st = st._replace(logV=jnp.log(M_tot) - st.log_rho_d)
@@ -686,7 +693,9 @@ def _collide_reads(cfg, p, st, arrays, a, b, key):
     dup = jnp.any((T[:, None] == T[None, :]) & (jnp.arange(nT)[None, :] < jnp.arange(nT)[:, None]) & Tm[None, :], axis=1)
     Tm = Tm & ~dup
     old = _Old(logm.base[T], psi.base[T], w.base[T], z.base[T], valid.base[T])   # pre-event values
-    writes = tuple((tuple(o.idx), tuple(o.val)) for o in (m, logm, psi, w, z, valid))
+    # stacked here, inside the loop: the loop's outputs are then a dozen arrays, not a hundred scalars (each
+    # output of the loop costs a buffer copy on CPU)
+    writes = tuple(_stack_writes(o.idx, o.val, o.base.shape[0]) if o.idx else None for o in (m, logm, psi, w, z, valid))
     return writes, T, Tm, old, M_tot, hi
 
 
