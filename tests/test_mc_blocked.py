@@ -232,15 +232,17 @@ def test_overlay_writes_equal_sequential_updates():
 def test_event_loop_updates_species_arrays_in_place(volume, grouping):
     """No whole-array copy per event: in the compiled event loop (``run._event`` in a ``fori_loop``) XLA updates
     the species arrays and R in place. A copy of an S-slot array there made the cost per event follow the
-    capacity (7 copies per event before stop 32, 37 of 91 us per event at S = 12 800: docs/design_notes.md);
-    the reads of one array that feed another's update run in ``run._opaque_reads``, the event has no lax.cond.
-    Checked on the optimised HLO for the four volume/grouping paths (duplication loops included); the capacity
-    4099 appears in no other shape."""
+    capacity (7 copies per event before stop 32; Ns* = 100: 92 us per event at S = 12 800, 302 us at 51 200,
+    62 us at 150: docs/design_notes.md); the reads of one array that feed another's update run in
+    ``run._opaque_reads``, and from ``run.COND_FREE_CAPACITY`` slots on the event has no lax.cond. Checked on the
+    optimised HLO for the four volume/grouping paths (duplication loops included); the capacity 16411 appears in
+    no other shape."""
     import re
 
     from jaxcoag.mc.engine import _default_outcome
 
-    cap = 4099
+    cap = 16411
+    assert cap >= RUN.COND_FREE_CAPACITY
     vol = dict(const_v=mc.ConstantVolume(), const_ns=mc.ConstantSpecies(), const_n=mc.ConstantNumber())[volume]
     grp = dict(equal_mass=mc.EqualMass(), none=None, distribution=mc.Distribution())[grouping]
     n_part = 1e30 if volume == "const_v" else 100.0
@@ -267,3 +269,27 @@ def test_event_loop_updates_species_arrays_in_place(volume, grouping):
     if volume == "const_v":
         M = float(jnp.sum(jnp.where(out.valid, jnp.ldexp(out.w, out.z) * out.m, 0.0)))
         np.testing.assert_allclose(M, float(out.M_tot), rtol=1e-12)
+
+
+@pytest.mark.parametrize("volume", ["const_v", "const_ns"])
+def test_cond_and_cond_free_events_are_the_same(volume):
+    """Below ``run.COND_FREE_CAPACITY`` slots the event is a lax.cond, from it on a masked cond-free event (no
+    S-slot copy): the same run at capacity 300 and at that capacity gives the same events bit for bit, with
+    duplication (constant Ns) and without."""
+    vol = mc.ConstantSpecies() if volume == "const_ns" else mc.ConstantVolume()
+    out = []
+    for cap in (300, RUN.COND_FREE_CAPACITY):
+        eng = jc.MonteCarlo(grouping=mc.EqualMass(), volume=vol, n_particles=40.0 if volume == "const_ns" else 1e30,
+                            ns_target=40, f_eps=1e-3, capacity=cap, rates=mc.IncrementalRates(n_refresh=200))
+        out.append(jc.evolve(K.Sum(0.5), eng, jc.Monodisperse(1.0, 1.0), jnp.array([0.0, 1.0, 3.0]),
+                             key=jax.random.key(5)))
+    a, b = out
+    assert int(a.n_events) == int(b.n_events) > 50
+    if volume == "const_ns":
+        assert int(a.n_dup) == int(b.n_dup) > 0
+    for f in ("m", "w", "z", "valid", "M_tot", "logV"):
+        x, y = np.asarray(getattr(a, f)), np.asarray(getattr(b, f))
+        if x.ndim == 2:
+            y = y[:, :300]
+        np.testing.assert_array_equal(x, y, err_msg=f)
+    assert not np.any(np.asarray(b.valid)[:, 300:])

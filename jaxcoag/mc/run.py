@@ -12,7 +12,9 @@ Structure of one run (all inside ``jax.jit``; batch runs with ``jax.vmap``):
         inner lax.while_loop (until done or maintenance due):
             one event: Δt, pair (a, b) [Gillespie full conditioning], snapshots, collision via
             the outcome module, donor fix-up (removal / demagnification), product zoom,
-            duplication (const_n / const_ns), incremental update of the rate row sums
+            duplication (const_n / const_ns), incremental update of the rate row sums; all reads
+            of the species arrays in one-trip loops (``_opaque_reads``), the writes as one scatter per
+            array; from ``COND_FREE_CAPACITY`` slots on without a lax.cond: no capacity-sized copy per event
 
 The two-level loop keeps the O(S^2) refresh out of the per-event path even under ``vmap``
 (where ``lax.cond`` would evaluate both branches).
@@ -126,6 +128,13 @@ def _fill(cfg, p, st, t_new):
 
     k, snaps = jax.lax.while_loop(cond, body, (st.k_out, st.snaps))
     return st._replace(k_out=k, snaps=snaps)
+
+
+#: Capacity (slots) from which the event runs without a lax.cond (no S-slot copy per event). Below it the event
+#: is a cond whose branch copies four species arrays in and out (S slots each); measured on 2 CPU cores (stop 32):
+#: at 657 live species and 8000 slots the cond-free event took 215-250 us against 175 us with the cond, at 67
+#: live species and 20 000 slots 56 us against 71 us. Both forms give the same events bitwise.
+COND_FREE_CAPACITY = 16384
 
 
 def _ns_hi_equal_mass(cfg):
@@ -325,8 +334,7 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     kernel K(m_t, m_b) is evaluated once and serves both the old and the new rate (a slot keeps
     its mass while it lives: donors and deduplicated products keep theirs, new products take a
     slot that was free before the event), so the per-entry work is one kernel value, two rate
-    formulas (arithmetic on ln K) and two exponentials. O(hi) work (XLA still copies a few S-slot arrays
-    per event at the scatters, docs/design_notes.md).
+    formulas (arithmetic on ln K) and two exponentials. O(hi) work, no S-slot copy (docs/design_notes.md).
 
     ``old`` (:class:`_Old`) holds the pre-event values of the slots T only; every other slot kept its
     values, so the old state of a block is the new one patched at T. (The whole pre-event arrays, kept
@@ -494,9 +502,10 @@ def _opaque_reads(f, arrays, *args):
     update in data-dependence order. An event reads slots of one species array to compute the new values of
     another (``valid[slot]`` decides the new ``w``; the pre-event values feed the rate update), and XLA fuses
     such a read into each of its consumers, so some reader was always unordered with some update: XLA then
-    copied the arrays, S slots each, on every event (7 copies; 37 of the 91 us per event at capacity 12 800 in
-    benchmarks/mc_scaling.py, an order of magnitude at capacity 80 000). Neither an optimization barrier nor
-    writing the read values back through the same scatter ordered them on CPU. A loop is not fused: here
+    copied the arrays, S slots each, on every event (7 copies; benchmarks/mc_scaling.py, Ns* = 100: 59 us per
+    event at 150 slots, 92 us at 12 800, 302 us at 51 200; without the copies 62, 71, 74 us). Neither an
+    optimization barrier nor writing the read values back through the same scatter ordered them on CPU. A loop
+    is not fused: here
     every read of the arrays happens inside it, and the scatters update the loop's outputs, of which the
     loop is the only other reader. Returns the arrays as the loop passed them (use these, not the inputs)."""
     out0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype),
@@ -763,47 +772,51 @@ def _event(cfg, p, st):
     log_lam = jnp.log(jnp.where(proceed, total, 1.0)) + st.s - st.logV
     E = -jnp.log1p(-u[0])  # Exp(1)
     t_new = st.t + E * jnp.exp(-log_lam)
-    # snapshots first (pre-event state, MC hazard 11), outside the conds below: the snapshot buffers
-    # (n_snap x S per array) are then no operand of a lax.cond, which on CPU copied them on every
-    # event (measured 116 -> 271 us/event going from 2 to 64 output times at S = 512)
+    # snapshots first (pre-event state, MC hazard 11); the snapshot buffers (n_snap x S per array) are no
+    # operand of the event below (as an operand of a lax.cond, on CPU they were copied on every event:
+    # measured 116 -> 271 us/event going from 2 to 64 output times at S = 512)
     st = _fill(cfg, p, st, jnp.where(proceed, t_new, -jnp.inf))
     snaps = st.snaps
     st = st._replace(snaps=None)
 
-    # every output time recorded: the run ends before this event. Folded into the one cond below: a second,
-    # nested cond with a pass-through branch made XLA copy the species arrays (S slots each) on every event
+    # every output time recorded: the run ends before this event
     finished = proceed & (st.k_out >= cfg.n_snap)
-
     do = proceed & ~finished
 
-    # the event, its writes masked by ``do``, without a lax.cond: XLA did not update the species arrays in place
-    # inside a cond branch (it copied four of them in and out of the branch, S slots each, on every event)
-    b = _pick_partner(cfg, p, st, a, u[3], u[4])
-    st2, T, Tm, old = _collide(cfg, p, st, a, b, kout, do)
-    st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm, do)
-    st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
-    need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
-    log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
-    st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp, do)
-    # maintenance triggers
-    rez = jnp.array(False)
-    if cfg.grouping == "equal_mass" and cfg.mode != "const_v":
-        rez = jnp.abs(log_mp - st2.zref) > 0.25 * LN2
-    elif cfg.grouping == "distribution":
-        rez = (jnp.abs(lmx - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
-    free = cfg.capacity - st2.ns
-    cap = free < cfg.n_prod + 2
-    if cfg.grouping == "equal_mass":
-        cap = cap | (cfg.capacity - free > _ns_hi_em(cfg, p["ns_target"]))
-    dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
-    st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
-    st2 = _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
+    def go(st, do):   # the event; its writes masked by do (out-of-range scatter indices, zero rate deltas)
+        b = _pick_partner(cfg, p, st, a, u[3], u[4])
+        st2, T, Tm, old = _collide(cfg, p, st, a, b, kout, do)
+        st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm, do)
+        st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
+        need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
+        log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
+        st2 = _duplicate(cfg, p, st2, kout, u[5:7], log_mp, do)
+        # maintenance triggers
+        rez = jnp.array(False)
+        if cfg.grouping == "equal_mass" and cfg.mode != "const_v":
+            rez = jnp.abs(log_mp - st2.zref) > 0.25 * LN2
+        elif cfg.grouping == "distribution":
+            rez = (jnp.abs(lmx - st2.zref) > 0.25 * LN2) | (st2.n_events % cfg.n_rezoom == 0)
+        free = cfg.capacity - st2.ns
+        cap = free < cfg.n_prod + 2
+        if cfg.grouping == "equal_mass":
+            cap = cap | (cfg.capacity - free > _ns_hi_em(cfg, p["ns_target"]))
+        dirty = st2.dirty | rez | cap | (st2.n_since_refresh >= cfg.n_refresh)
+        st2 = st2._replace(rezoom=st2.rezoom | rez, dirty=dirty)
+        return _stop(st2, st2.n_events >= p["max_events"], STATUS.MAX_EVENTS)
 
-    # no event: the rate sum was not usable (or the run is finished, see above)
-    st1 = _stop(st, nonfinite & fresh, STATUS.NONFINITE)
-    st1 = _stop(st1, zero & fresh, STATUS.ZERO_RATE)
-    st1 = st1._replace(dirty=st1.dirty | (~fresh & ~proceed), done=st1.done | finished)
+    def no_event(st):   # no event: the rate sum was not usable (or the run is finished, see above)
+        st = _stop(st, nonfinite & fresh, STATUS.NONFINITE)
+        st = _stop(st, zero & fresh, STATUS.ZERO_RATE)
+        return st._replace(dirty=st.dirty | (~fresh & ~proceed), done=st.done | finished)
 
+    if cfg.capacity < COND_FREE_CAPACITY:
+        return jax.lax.cond(do, lambda s: go(s, True), no_event, st)._replace(snaps=snaps)
+    # large capacity: no lax.cond. XLA did not update the species arrays in place inside a cond branch (it
+    # copied four of them in and out of the branch, S slots each, on every event); the event then runs on every
+    # iteration with its writes masked (where do is False, rarely: the next maintenance refreshes) and the
+    # scalar fields are selected. Below COND_FREE_CAPACITY the cond is faster (docs/design_notes.md).
+    st2, st1 = go(st, do), no_event(st)
     big = ("m", "logm", "psi", "w", "z", "valid", "R")   # already masked by do
     out = {k: (getattr(st2, k) if k in big else jax.tree_util.tree_map(lambda x2, x1: jnp.where(do, x2, x1),
                                                                        getattr(st2, k), getattr(st1, k)))
