@@ -133,7 +133,8 @@ def _fill(cfg, p, st, t_new):
 #: Capacity (slots) from which the event runs without a lax.cond (no S-slot copy per event). Below it the event
 #: is a cond whose branch copies four species arrays in and out (S slots each); measured on 2 CPU cores (stop 32):
 #: at 657 live species and 8000 slots the cond-free event took 215-250 us against 175 us with the cond, at 67
-#: live species and 20 000 slots 56 us against 71 us. Both forms give the same events bitwise.
+#: live species and 20 000 slots 56 us against 71 us (minima of two runs each). Both forms give the same events
+#: bitwise.
 COND_FREE_CAPACITY = 16384
 
 
