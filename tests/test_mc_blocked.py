@@ -232,8 +232,8 @@ def test_overlay_writes_equal_sequential_updates():
 def test_event_loop_updates_species_arrays_in_place(volume, grouping):
     """No whole-array copy per event: in the compiled event loop (``run._event`` in a ``fori_loop``) XLA updates
     the species arrays and R in place. A copy of an S-slot array there made the cost per event follow the
-    capacity (7 copies per event before stop 32; Ns* = 100: 92 us per event at S = 12 800, 302 us at 51 200,
-    62 us at 150: docs/design_notes.md); the reads of one array that feed another's update run in
+    capacity (7 copies per event before stop 32; Ns* = 100: 94 us per event at S = 12 800, 308 us at 51 200,
+    54 us at 150: benchmarks/results/mc_scaling.json); the reads of one array that feed another's update run in
     ``run._opaque_reads``, and from ``run.COND_FREE_CAPACITY`` slots on the event has no lax.cond. Checked on the
     optimised HLO for the four volume/grouping paths (duplication loops included); the capacity 16411 appears in
     no other shape."""

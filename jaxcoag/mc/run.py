@@ -335,7 +335,7 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     kernel K(m_t, m_b) is evaluated once and serves both the old and the new rate (a slot keeps
     its mass while it lives: donors and deduplicated products keep theirs, new products take a
     slot that was free before the event), so the per-entry work is one kernel value, two rate
-    formulas (arithmetic on ln K) and two exponentials. O(hi) work, no S-slot copy (docs/design_notes.md).
+    formulas (arithmetic on ln K) and two exponentials. O(hi) work, no S-slot copy of its own (docs/design_notes.md).
 
     ``old`` (:class:`_Old`) holds the pre-event values of the slots T only; every other slot kept its
     values, so the old state of a block is the new one patched at T. (The whole pre-event arrays, kept
@@ -503,12 +503,12 @@ def _opaque_reads(f, arrays, *args):
     update in data-dependence order. An event reads slots of one species array to compute the new values of
     another (``valid[slot]`` decides the new ``w``; the pre-event values feed the rate update), and XLA fuses
     such a read into each of its consumers, so some reader was always unordered with some update: XLA then
-    copied the arrays, S slots each, on every event (7 copies; benchmarks/mc_scaling.py, Ns* = 100: 59 us per
-    event at 150 slots, 92 us at 12 800, 302 us at 51 200; without the copies 62, 71, 74 us). Neither an
-    optimization barrier nor writing the read values back through the same scatter ordered them on CPU. A loop
-    is not fused: here
-    every read of the arrays happens inside it, and the scatters update the loop's outputs, of which the
-    loop is the only other reader. Returns the arrays as the loop passed them (use these, not the inputs)."""
+    copied the arrays, S slots each, on every event (7 copies). Neither an optimization barrier nor writing the
+    read values back through the same scatter ordered them on CPU. A loop is not fused: here every read of the
+    arrays happens inside it, and the scatters update the loop's outputs, of which the loop is the only other
+    reader. Returns the arrays as the loop passed them (use these, not the inputs). Measured effect
+    (benchmarks/results/mc_scaling.json, Ns* = 100): 54 / 94 / 308 us per event at 150 / 12 800 / 51 200 slots
+    before, 52 / 80 / 74 us after (below ``COND_FREE_CAPACITY`` the event's cond still copies four arrays)."""
     out0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype),
                                   jax.eval_shape(lambda a, x: f(a, *x), arrays, args))
     # args[0] >= 0 (a slot count): XLA cannot prove it, so it can neither unroll the loop (one trip) nor hoist
@@ -705,7 +705,8 @@ def _collide_reads(cfg, p, st, arrays, a, b, key):
     old = _Old(logm.base[T], psi.base[T], w.base[T], z.base[T], valid.base[T])   # pre-event values
     # stacked here, inside the loop: the loop's outputs are then a dozen arrays, not a hundred scalars (each
     # output of the loop costs a buffer copy on CPU)
-    writes = tuple(_stack_writes(o.idx, o.val, o.base.shape[0]) if o.idx else None for o in (m, logm, psi, w, z, valid))
+    writes = tuple(_stack_writes(o.idx, o.val, o.base.shape[0]) if o.idx else None
+                   for o in (m, logm, psi, w, z, valid))
     return writes, T, Tm, old, M_tot, hi
 
 
