@@ -35,6 +35,7 @@ import numpy as np
 from ..._validate import JaxcoagInputError, is_traced
 
 __all__ = [
+    "rotate_free_batch",
     "inertia_tensor",
     "principal_axes",
     "quat_from_matrix",
@@ -393,6 +394,91 @@ def _rotate_masked(q, Pi, Ip, dt, n_sub, n_max):
         return jnp.where(act, nq, c[0]), jnp.where(act, npi, c[1])
 
     return jax.lax.fori_loop(0, n_max, body, (quat_normalize(q), _f64(Pi)))
+
+
+# Taylor coefficients 1/((k)(k+1)) of the nested (Horner) forms of sin and cos: exact to round-off for |x| <= 1
+# (the first omitted terms are x^19/19! < 1e-17 and x^20/20! < 1e-18)
+_SIN_NEST = tuple(1.0 / (k * (k + 1)) for k in range(2, 17, 2))  # 1/(2*3), 1/(4*5), ..., 1/(16*17)
+_COS_NEST = tuple(1.0 / (k * (k + 1)) for k in range(1, 18, 2))  # 1/(1*2), 1/(3*4), ..., 1/(17*18)
+
+
+def _sincos_small(x):
+    """(sin x, cos x) by their Taylor series in nested form, to round-off for |x| <= 1 (arithmetic only, so
+    it vectorises; XLA's float64 sin and cos cost ~4-6 ns per value on CPU against <1 ns here)."""
+    x2 = x * x
+    ps = 1.0
+    for c in reversed(_SIN_NEST):
+        ps = 1.0 - (x2 * c) * ps
+    pc = 1.0
+    for c in reversed(_COS_NEST):
+        pc = 1.0 - (x2 * c) * pc
+    return x * ps, pc
+
+
+def _free_step_rows(X, Ipinv, h, small):
+    """:func:`_free_step` for a batch of bodies stored as rows: ``X`` (8, B) holds q (rows 0-3), Π (rows 4-6)
+    and a pad row; ``Ipinv`` (3, B); ``h`` scalar or (B,). ``small``: every half angle is <= 1 rad (sine and
+    cosine by :func:`_sincos_small`). cos θ and sin θ come from the half angle (1 − 2 sin²(θ/2),
+    2 sin(θ/2) cos(θ/2)), so each axis flow evaluates one sine and one cosine.
+
+    Each flow ends in an ``optimization_barrier``: without it XLA (CPU) fused the five flows into one
+    computation per output row and evaluated the whole chain once for each of the 7 rows (a batch of 128
+    bodies took 19 us per substep this way and 40 us as a vmap over (4,)/(3,) vectors, 5 us with the barriers).
+    """
+    sincos = _sincos_small if small else (lambda x: (jnp.sin(x), jnp.cos(x)))
+
+    def flow(X, k, hk):
+        sh, ch = sincos((0.5 * hk) * (X[4 + k] * Ipinv[k]))
+        sh, ch, c, s = jax.lax.optimization_barrier((sh, ch, 1.0 - 2.0 * sh * sh, 2.0 * sh * ch))
+        i, j = (k + 1) % 3, (k + 2) % 3
+        rows = [ch * X[a] + sh * (_QE_SIGN[k][a] * X[_QE_PERM[k][a]]) for a in range(4)]
+        P = [X[4], X[5], X[6]]
+        P[i], P[j] = c * X[4 + i] + s * X[4 + j], -s * X[4 + i] + c * X[4 + j]
+        return jax.lax.optimization_barrier(jnp.stack(rows + P + [X[7]]))
+
+    for k, f in ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5)):
+        X = flow(X, k, f * h)
+    n = jnp.sqrt(X[0] * X[0] + X[1] * X[1] + X[2] * X[2] + X[3] * X[3])
+    return X.at[:4].multiply(1.0 / n)  # |q| = 1 ± round-off before the division: never zero
+
+
+def rotate_free_batch(q, Pi, Ip, dt, n_sub):
+    """:func:`rotate_free` of a batch of bodies: the same scheme and accuracy, written on rows of one (8, B)
+    array (a vmap of :func:`rotate_free` made XLA gather and transpose the per-body (4,)/(3,) vectors in every
+    substep: ~0.3 us per body and substep on CPU, against ~0.04-0.07 us here).
+
+    Arguments:
+        q: (B, 4) quaternions; Pi: (B, 3) body angular momenta [g cm² s⁻¹]; Ip: (B, 3) principal moments
+        [g cm²]; dt: scalar or (B,) step [s]; n_sub: int >= 1 or a (B,) int array (traced allowed): body b
+        takes ``n_sub[b]`` substeps of ``dt / n_sub[b]`` (the loop runs to the largest count, the others are
+        masked once done).
+
+    Returns:
+        ``(q, Pi)`` after ``dt``, shapes (B, 4), (B, 3). Where every half angle ``|Π_k| h / (2 I_k)`` of the
+        batch is at most 1 rad (always, with ``max|ω| h <= 0.02``), sine and cosine are Taylor series in
+        nested form (exact to round-off there); otherwise XLA's ``sin``/``cos``.
+
+    References: as :func:`rotate_free` (Dullweber, Leimkuhler & McLachlan 1997).
+    """
+    Ipinv = _inv_moments(Ip)
+    ns = jnp.broadcast_to(jnp.maximum(jnp.asarray(n_sub), 1), q.shape[:1])
+    h = jnp.broadcast_to(_f64(dt), q.shape[:1]) / ns.astype(jnp.float64)
+    per_body = jnp.ndim(n_sub) > 0
+    Pi = _f64(Pi)
+    q = jax.vmap(quat_normalize)(_f64(q))
+    # |Π_k| / I_k <= |Π| max_k(1/I_k), and no flow is longer than h
+    bound = jnp.max(jnp.sqrt(jnp.sum(Pi * Pi, axis=-1)) * jnp.max(Ipinv, axis=-1) * jnp.abs(h), initial=0.0)
+    X = jnp.concatenate([q.T, Pi.T, jnp.zeros((1, q.shape[0]))], axis=0)
+    Iinv = Ipinv.T
+
+    def run(small):
+        def sub(k, Y):
+            Z = _free_step_rows(Y, Iinv, h, small)
+            return jnp.where(k < ns, Z, Y) if per_body else Z
+        return lambda X: jax.lax.fori_loop(0, jnp.max(ns), sub, X)
+
+    X = jax.lax.cond(bound <= 1.0, run(True), run(False), X)
+    return X[:4].T, X[4:7].T
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -27,24 +27,26 @@ Numerical scheme (one synchronized global time; all arrays have the fixed capaci
 * Models (iii)-(v): conservative advancement at sphere level (spec A4): gaps ``g`` and rates ``ġ`` of
   all neighbour pairs of spheres in different aggregates, the acceleration bound
   ``A = 2(Ω_a² R_max,a + Ω_b² R_max,b)`` of torque-free rotation, the global step
-  ``dt = η min t*`` with t* from :func:`~jaxcoag.aggregates.rigid.body.safe_time`, so a gap never closes
-  within a step (no tunnelling at any speed); a pair with ``g <= tol`` and ``ġ < 0`` is an event and is
-  resolved alone (coagulation by :func:`~jaxcoag.aggregates.rigid.body.merge`, restitution by
-  :func:`~jaxcoag.aggregates.rigid.body.restitute`). Rotation uses the symmetric splitting integrator
-  :func:`~jaxcoag.aggregates.rigid.body.rotate_free` with ``|ω| h <= 0.02``.
-* Neighbour structure (both schemes): a Verlet list of capacity ``K`` per sphere with cutoff
-  ``R_s + R_t + skin`` (pairs within one aggregate excluded), built from a uniform cell grid (cells no
-  smaller than the cutoff, at most ``cell_capacity`` spheres each; the 27 surrounding cells are searched)
-  in O(n0), or by an all-pairs scan when the cutoff exceeds L/3. It is rebuilt when a sphere may have
-  moved (or, in model ii, grown) by skin/2 since the last build, so no contact can be missed; overflow of
-  K or of a cell stops the run with status ``capacity_exceeded`` (raise ``neighbors`` /
-  ``cell_capacity``; :attr:`BoxResult.status_message` and a warning say which). The candidate width per
-  cell follows the fullest cell (2, 4, ... up to ``cell_capacity``). Models (iii)-(v) keep the list's pairs
-  once (s < t) in a compact pair list and scan only the pairs in use; rotation touches only live
-  aggregates and spinning spheres. A step therefore costs O(n0) with a small constant (sphere positions,
-  the global move, the displacement test) plus O(pairs in use); the number of steps per unit time grows
-  with n0 as well (one global time), so the cost per unit simulated time grows faster than n0
-  (``benchmarks/rigid_scaling.py`` measures it).
+  ``dt = η min t*`` with t* from :func:`~jaxcoag.aggregates.rigid.body.safe_time` for the gap ``g − tol/2``
+  (η = 1 by default), so no gap closes below tol/2 within a step (no tunnelling at any speed) and a pair
+  approaching at a nearly constant rate reaches the event band in one step; a pair with ``g <= tol`` and
+  ``ġ < 0`` is an event and is resolved alone (coagulation by :func:`~jaxcoag.aggregates.rigid.body.merge`,
+  restitution by :func:`~jaxcoag.aggregates.rigid.body.restitute`). Rotation uses the symmetric splitting
+  integrator of :func:`~jaxcoag.aggregates.rigid.body.rotate_free` with ``|ω| h <= 0.02`` per body
+  (:func:`~jaxcoag.aggregates.rigid.body.rotate_free_batch`, bodies grouped by their substep count).
+* Neighbour structure: a Verlet list with cutoff ``R_s + R_t + skin`` (pairs within one aggregate excluded),
+  at most ``K`` partners per sphere, built from a uniform cell grid (cells no smaller than the cutoff; the
+  27 surrounding cells are searched) in O(n0), or by an all-pairs scan when the cutoff exceeds L/3. It is
+  rebuilt when a sphere may have moved (or, in model ii, grown) by skin/2 since the last build, so no
+  contact can be missed; a sphere with more than K partners stops the run with status ``capacity_exceeded``
+  (raise ``neighbors``; :attr:`BoxResult.status_message` and a warning say which). Models (i)-(ii) keep
+  (n0, K) rows whose candidates are the 27 cells padded to the fullest one (2, 4, ... up to
+  ``cell_capacity`` spheres per cell, a second overflow). Models (iii)-(v) build the pairs once (s < t)
+  directly (:func:`_build_pairs`: candidates enumerated over the occupied cells only, no per-cell capacity)
+  and scan only the pairs in use; rotation touches only live aggregates and spinning spheres. A step
+  therefore costs O(n0) with a small constant (sphere positions, the global move, the displacement test)
+  plus O(pairs in use); the number of steps per unit time grows with n0 as well (one global time), so the
+  cost per unit simulated time grows faster than n0 (``benchmarks/rigid_scaling.py`` measures it).
 * Periodic images: minimum image per sphere pair (valid because the cutoff is below L/2); contacts of an
   aggregate with its own image are not detected (spec A4.4; R95 is silent).
 
@@ -449,19 +451,75 @@ def _build_neighbors(x, R, group, active, L, skin, K, C, nc_max, dynamic=True):
     return jax.lax.cond(nc >= 3, by_cells, all_pairs, None)
 
 
+def _build_pairs(x, R, group, L, skin, K, P, nc, block=2048):
+    """Pair list (each pair once, s < t) of spheres of different ``group`` within R_s + R_t + skin, from a cell
+    grid of ``nc`` (static, >= 3) cells per side whose side is at least the largest cutoff.
+
+    The candidates of sphere s are the occupants of its 27 cells, enumerated as one flat sequence over the
+    (sphere, cell) pairs (segment k of sphere s holds count(cell) entries) and scanned in blocks up to its
+    actual length: the work follows the occupied cells, not the fullest one (padding every sphere's 27 cells to
+    the fullest cell's count, as :func:`_build_neighbors` does, made ~20x the candidates in clustered boxes).
+    The pairs come in the row-major order of :func:`_build_neighbors`' list (rows s, then the 27 cells, then
+    the cell's occupants in sphere order), so both give the same list.
+
+    Returns (pair_i, pair_j, n_pairs, overflow): arrays of capacity P, the number in use, and whether a sphere
+    has more than K partners (then the list is incomplete: the run must stop, as on an overflowing Verlet list).
+    """
+    n = x.shape[0]
+    h = L / nc
+    ci = jnp.clip(jnp.floor(x / h).astype(jnp.int32), 0, nc - 1)
+    cid = ci[:, 0] + nc * (ci[:, 1] + nc * ci[:, 2])
+    ncell = nc**3
+    order = jnp.argsort(cid).astype(jnp.int32)  # stable: occupants of a cell in sphere order
+    count = jnp.zeros(ncell, jnp.int32).at[cid].add(1)
+    start = jnp.cumsum(count) - count
+    off = np.stack(np.meshgrid(np.arange(-1, 2), np.arange(-1, 2), np.arange(-1, 2), indexing="ij"), -1).reshape(27, 3)
+    c3 = jnp.mod(ci[:, None, :] + off[None, :, :], nc)
+    cell = (c3[..., 0] + nc * (c3[..., 1] + nc * c3[..., 2])).reshape(-1)  # (27 n,) segment -> cell
+    seg_n = count[cell]
+    seg_end = jnp.cumsum(seg_n)  # int32: 27 n * max count, far below 2^31 for any grid that fits in memory
+    total = seg_end[-1]
+    lane = jnp.arange(block, dtype=jnp.int32)
+
+    def body(b, c):
+        pi, pj, npair, deg = c
+        f = b * block + lane
+        ok = f < total
+        seg = jnp.minimum(jnp.searchsorted(seg_end, f, side="right"), 27 * n - 1).astype(jnp.int32)
+        within = f - (seg_end[seg] - seg_n[seg])
+        s = seg // 27
+        t = order[jnp.clip(start[cell[seg]] + within, 0, n - 1)]
+        d = _mimg(x[t] - x[s], L)
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        acc = ok & (t != s) & (group[t] != group[s]) & (dist < R[s] + R[t] + skin)
+        deg = deg.at[s].add(acc.astype(jnp.int32))  # partners of s (each pair is met from both ends)
+        keep = acc & (t > s)
+        pos = npair + jnp.cumsum(keep) - 1
+        tgt = jnp.where(keep, pos, P)
+        return (pi.at[tgt].set(s, mode="drop"), pj.at[tgt].set(t, mode="drop"),
+                npair + jnp.sum(keep).astype(jnp.int32), deg)
+
+    init = (jnp.zeros(P, jnp.int32), jnp.zeros(P, jnp.int32), jnp.int32(0), jnp.zeros(n, jnp.int32))
+    pi, pj, npair, deg = jax.lax.fori_loop(0, (total + block - 1) // block, body, init)
+    over = (jnp.max(deg) > K) | (npair > P)
+    return pi, pj, jnp.minimum(npair, P), over
+
+
 # ------------------------------------------------------------------------------------------------ engine
 class RigidBox(AbstractEngine):
     """Engine of the periodic box of spheres / rigid aggregates (R95 §3; module docstring for the scheme).
 
     Fields (static: they fix the compiled program):
         neighbors: Verlet-list capacity K per sphere (default 48).
-        cell_capacity: spheres per grid cell C (default 16).
+        cell_capacity: spheres per grid cell C of the sphere models (i), (ii) (default 16; the aggregate models'
+            pair build has no per-cell capacity).
         skin: Verlet skin in units of r0 (cutoff R_s + R_t + skin r0); default 12 for the sphere models (i, ii:
             fewer rebuilds of the event predictions) and 6 for the aggregate models.
         log_capacity: collision-log capacity (default 20000).
         max_steps: loop-iteration budget over the whole run (status ``max_steps_reached`` when spent).
         tol: contact gap tolerance of conservative advancement, in units of r0 (default 1e-6).
-        eta: fraction of the safe time taken per step (default 0.9).
+        eta: fraction of the safe time taken per step, in (0, 1] (default 1: the safe time is that to the gap
+            tol/2, so a full step cannot close a gap below tol/2).
         n_rot: maximum rotation substeps per step (|ω| h <= 0.02 per substep; the step is capped to match;
             the substep count is global, so a step costs as many substeps as its fastest spinner needs).
     """
@@ -472,7 +530,7 @@ class RigidBox(AbstractEngine):
     log_capacity: int = eqx.field(static=True, default=20000)
     max_steps: int = eqx.field(static=True, default=50_000_000)
     tol: float = eqx.field(static=True, default=1e-6)
-    eta: float = eqx.field(static=True, default=0.9)
+    eta: float = eqx.field(static=True, default=1.0)
     n_rot: int = eqx.field(static=True, default=64)
 
     def __check_init__(self):
@@ -486,8 +544,9 @@ class RigidBox(AbstractEngine):
                 continue
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise JaxcoagInputError(f"RigidBox({name}=...) must be a number > 0; got {v!r}.")
-        if self.eta >= 1.0:
-            raise JaxcoagInputError(f"RigidBox(eta=...) must be in (0, 1) (fraction of the safe time); got {self.eta}.")
+        if self.eta > 1.0:
+            raise JaxcoagInputError(f"RigidBox(eta=...) must be in (0, 1] (fraction of the safe time); "
+                                    f"got {self.eta}.")
 
     @property
     def name(self) -> str:
@@ -578,10 +637,10 @@ def capacity_message(flags):
                     "logged): raise RigidBox(log_capacity=...) (default 20000) above the expected number of "
                     "collisions")
     if flags & 2:
-        what.append("a sphere had more neighbours within R_s + R_t + skin than the Verlet list holds, or a grid cell "
-                    "more spheres than it holds, so contacts could be missed and the run stopped at that step "
-                    "(later outputs repeat it): raise RigidBox(neighbors=...) (default 48) and "
-                    "RigidBox(cell_capacity=...) (default 16), or lower RigidBox(skin=...)")
+        what.append("a sphere had more neighbours within R_s + R_t + skin than the Verlet list holds, or "
+                    "(models i, ii) a grid cell more spheres than it holds, so contacts could be missed and the run "
+                    "stopped at that step (later outputs repeat it): raise RigidBox(neighbors=...) (default 48) "
+                    "and, for models i and ii, RigidBox(cell_capacity=...) (default 16), or lower RigidBox(skin=...)")
     if not what:
         return ""
     return "Rigid box (jaxcoag.aggregates.rigid) status capacity_exceeded: " + "; ".join(what) + "."
@@ -758,6 +817,12 @@ def _sphere_loop(engine, st, t_seg, nc_max):
 # ------------------------------------------------------------------------------------------------ aggregates (iii-v)
 def _agg_rebuild(engine, st, x, nc_max):
     n = x.shape[0]
+    P = st.pair_i.shape[0]
+    if nc_max >= 3:
+        pair_i, pair_j, n_pairs, over = _build_pairs(x, st.sph_R, st.sph_agg, st.par["L"], st.par["skin"],
+                                                     engine.neighbors, P, nc_max)
+        return eqx.tree_at(lambda s: (s.pair_i, s.pair_j, s.n_pairs, s.x_ref, s.n_build, s.flags), st,
+                           (pair_i, pair_j, n_pairs, x, st.n_build + 1, st.flags | jnp.where(over, 2, 0)))
     nb, over = _build_neighbors(x, st.sph_R, st.sph_agg, jnp.ones(n, bool), st.par["L"], st.par["skin"],
                                 engine.neighbors, engine.cell_capacity, nc_max, dynamic=False)
     # each pair once (s < t), in the row-major order of nb: the list is symmetric, so this is every pair
@@ -798,7 +863,9 @@ def _pair_scan(st, x, u, acc, tol, chunk=2048):
         gdot = jnp.sum(d * (u[j] - u[i]), axis=-1) / jnp.where(dist > 0, dist, 1.0)
         A = 2.0 * (acc[ga] + acc[gb])
         ev = valid & (g <= tol) & (gdot < 0)
-        ts = jnp.min(jnp.where(valid, body.safe_time(g, gdot, A), jnp.inf))
+        # safe time to the gap tol/2, not to contact: a step of t* lands an approaching pair inside the event
+        # band (tol/2, tol] in one step when A t* << |ġ|, instead of closing a fraction eta of the gap per step
+        ts = jnp.min(jnp.where(valid, body.safe_time(g - 0.5 * tol, gdot, A), jnp.inf))
         ge = jnp.where(ev, gdot, jnp.inf)
         k = jnp.argmin(ge)
         better = ge[k] < gbest
@@ -896,24 +963,32 @@ def _agg_event(engine, st, s, t, x, r):
 
 
 def _agg_advance(engine, st, dt, Om):
-    # one substep count for all bodies (|ω| h <= 0.02 for the fastest spinner; spec A3)
-    nsub = jnp.clip(jnp.ceil(jnp.max(Om) * dt / 0.02), 1, engine.n_rot).astype(jnp.int32)
-    h = dt / nsub.astype(jnp.float64)
-    # only live aggregates and spinning spheres move in orientation (a free sphere with Π = 0 keeps q = 1
-    # exactly), so the work follows them, in chunks of at most 512 bodies
+    # per-body substep counts, |ω| h <= 0.02 for each body (spec A3; Om bounds |ω| over the free motion)
     n = st.alive.shape[0]
+    # only live aggregates and spinning spheres move in orientation (a free sphere with Π = 0 keeps q = 1
+    # exactly), so the work follows them
     spin = st.alive & ((st.nmem > 1) | jnp.any(st.Pi != 0, axis=-1))
-    ids = jnp.nonzero(spin, size=n, fill_value=n)[0]
+    nsub = jnp.where(spin, jnp.clip(jnp.ceil(Om * dt / 0.02), 1, engine.n_rot), 0).astype(jnp.int32)
+    # the spinning bodies in chunks of 128, ordered by substep class (1, 2, 3-4, 5-8, ...: ceil log2 nsub), most
+    # substeps first, so that a chunk's bodies need similar counts: the chunk loops to its largest count and masks
+    # the others (body.rotate_free_batch), and the work is within 2x of sum(nsub) instead of m max(nsub)
+    ncls = int(math.ceil(math.log2(engine.n_rot))) + 1
+    cls = jnp.ceil(jnp.log2(jnp.maximum(nsub, 1).astype(jnp.float64)) - 1e-9).astype(jnp.int32)
+    cls = jnp.where(spin, ncls - 1 - jnp.clip(cls, 0, ncls - 1), ncls)  # 0 = most substeps; ncls = not spinning
+    onehot = (cls[:, None] == jnp.arange(ncls)[None, :]).astype(jnp.int32)
+    within = jnp.cumsum(onehot, axis=0) - onehot
+    start = jnp.cumsum(jnp.sum(onehot, axis=0)) - jnp.sum(onehot, axis=0)
+    pos = jnp.where(spin, start[jnp.minimum(cls, ncls - 1)] + jnp.sum(within * onehot, axis=1), n)
+    ids = jnp.full(n, n, jnp.int32).at[pos].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
     m = jnp.sum(spin).astype(jnp.int32)
-    B = min(n, 512)
+    B = min(n, 128)
     lane = jnp.arange(B)
 
     def chunk(c, qp):
         p = c * B + lane
         ok = p < m
         sl = jnp.where(ok, ids[jnp.minimum(p, n - 1)], 0)
-        qb, pb = jax.lax.fori_loop(0, nsub, lambda _, z: jax.vmap(
-            lambda q, p, i: body.rotate_free(q, p, i, h, 1))(z[0], z[1], st.Ip[sl]), (qp[0][sl], qp[1][sl]))
+        qb, pb = body.rotate_free_batch(qp[0][sl], qp[1][sl], st.Ip[sl], dt, jnp.where(ok, nsub[sl], 1))
         tgt = jnp.where(ok, sl, n)
         return qp[0].at[tgt].set(qb, mode="drop"), qp[1].at[tgt].set(pb, mode="drop")
 
