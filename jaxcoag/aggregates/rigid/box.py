@@ -361,23 +361,49 @@ def _wrap(x, L):
     return jnp.where(x >= L, 0.0, x)
 
 
-def _rot(q):
-    """(n, 3, 3) rotation matrices of (n, 4) quaternions."""
-    return jax.vmap(body.matrix_from_quat)(q)
+def _dot3(a, b):
+    """``sum(a * b, axis=-1)`` over a trailing axis of 3, written out: XLA (CPU) turned such tiny reductions over
+    10^4-10^5 rows into library reduction kernels costing ~50 ns per row (1-2 ms per pass at 3e4 spheres)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def _max_spin(Pi, Ip):
+    """:func:`~jaxcoag.aggregates.rigid.body.max_spin` of every slot, with the 3-component sums written out."""
+    inv = body._inv_moments(Ip)
+    imin = jnp.minimum(jnp.minimum(Ip[:, 0], Ip[:, 1]), Ip[:, 2])
+    two_t = 2.0 * (0.5 * _dot3(Pi * Pi, inv))
+    ok = imin > 0
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, two_t / jnp.where(ok, imin, 1.0), 0.0)), 0.0)
 
 
 def _sphere_pos(st):
     """Space positions (wrapped), unwrapped offsets A b and velocities of every sphere.
 
-    The 3x3 products are written as elementwise sums (a batched matrix product of n tiny matrices is
-    several times slower on CPU, and this runs at every step); ω = A diag(1/I_k) Π as in
-    :func:`~jaxcoag.aggregates.rigid.body.omega_space`."""
-    Rm = _rot(st.q)  # (slots, 3, 3)
-    w = jnp.sum(Rm * (st.Pi * body._inv_moments(st.Ip))[:, None, :], axis=-1)[st.sph_agg]
-    A = Rm[st.sph_agg]  # (n, 3, 3)
-    r = jnp.sum(A * st.sph_b[:, None, :], axis=-1)
-    x = _wrap(st.X[st.sph_agg] + r, st.par["L"])
-    u = st.V[st.sph_agg] + jnp.cross(w, r)
+    Elementwise on columns: the rotation matrix entries of :func:`~jaxcoag.aggregates.rigid.body.matrix_from_quat`
+    per slot, then one gather of the 18 slot numbers (matrix, space spin ω = A diag(1/I_k) Π as in
+    :func:`~jaxcoag.aggregates.rigid.body.omega_space`, X, V) per sphere (a batched matrix product of n tiny matrices,
+    or sums over their axes of 3, is several times slower on CPU, and this runs at every step)."""
+    q = st.q
+    nq2 = q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2] + q[:, 3] * q[:, 3]
+    pos = nq2 > 0
+    nq = jnp.where(pos, jnp.sqrt(jnp.where(pos, nq2, 1.0)), 0.0)
+    qn = jnp.where(pos[:, None], q / jnp.where(pos, nq, 1.0)[:, None], jnp.asarray([1.0, 0.0, 0.0, 0.0]))
+    w, x, y, z = qn[:, 0], qn[:, 1], qn[:, 2], qn[:, 3]
+    R = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    v = st.Pi * body._inv_moments(st.Ip)
+    ws = [R[i][0] * v[:, 0] + R[i][1] * v[:, 1] + R[i][2] * v[:, 2] for i in range(3)]
+    slot = jnp.stack([R[i][k] for i in range(3) for k in range(3)] + ws
+                     + [st.X[:, i] for i in range(3)] + [st.V[:, i] for i in range(3)], axis=1)  # (slots, 18)
+    G = slot[st.sph_agg]
+    b = st.sph_b
+    r = jnp.stack([G[:, 3 * i] * b[:, 0] + G[:, 3 * i + 1] * b[:, 1] + G[:, 3 * i + 2] * b[:, 2] for i in range(3)],
+                  axis=1)
+    wg, Xg, Vg = G[:, 9:12], G[:, 12:15], G[:, 15:18]
+    x = _wrap(Xg + r, st.par["L"])
+    u = Vg + jnp.stack([wg[:, 1] * r[:, 2] - wg[:, 2] * r[:, 1], wg[:, 2] * r[:, 0] - wg[:, 0] * r[:, 2],
+                        wg[:, 0] * r[:, 1] - wg[:, 1] * r[:, 0]], axis=1)
     return x, r, u
 
 
@@ -858,9 +884,9 @@ def _pair_scan(st, x, u, acc, tol, chunk=2048):
         ga, gb = st.sph_agg[i], st.sph_agg[j]
         valid = ok & (ga != gb)
         d = _mimg(x[j] - x[i], L)
-        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        dist = jnp.sqrt(_dot3(d, d))
         g = dist - (st.sph_R[i] + st.sph_R[j])
-        gdot = jnp.sum(d * (u[j] - u[i]), axis=-1) / jnp.where(dist > 0, dist, 1.0)
+        gdot = _dot3(d, u[j] - u[i]) / jnp.where(dist > 0, dist, 1.0)
         A = 2.0 * (acc[ga] + acc[gb])
         ev = valid & (g <= tol) & (gdot < 0)
         # safe time to the gap tol/2, not to contact: a step of t* lands an approaching pair inside the event
@@ -969,16 +995,13 @@ def _agg_advance(engine, st, dt, Om):
     # exactly), so the work follows them
     spin = st.alive & ((st.nmem > 1) | jnp.any(st.Pi != 0, axis=-1))
     nsub = jnp.where(spin, jnp.clip(jnp.ceil(Om * dt / 0.02), 1, engine.n_rot), 0).astype(jnp.int32)
-    # the spinning bodies in chunks of 128, ordered by substep class (1, 2, 3-4, 5-8, ...: ceil log2 nsub), most
-    # substeps first, so that a chunk's bodies need similar counts: the chunk loops to its largest count and masks
-    # the others (body.rotate_free_batch), and the work is within 2x of sum(nsub) instead of m max(nsub)
-    ncls = int(math.ceil(math.log2(engine.n_rot))) + 1
-    cls = jnp.ceil(jnp.log2(jnp.maximum(nsub, 1).astype(jnp.float64)) - 1e-9).astype(jnp.int32)
-    cls = jnp.where(spin, ncls - 1 - jnp.clip(cls, 0, ncls - 1), ncls)  # 0 = most substeps; ncls = not spinning
-    onehot = (cls[:, None] == jnp.arange(ncls)[None, :]).astype(jnp.int32)
-    within = jnp.cumsum(onehot, axis=0) - onehot
-    start = jnp.cumsum(jnp.sum(onehot, axis=0)) - jnp.sum(onehot, axis=0)
-    pos = jnp.where(spin, start[jnp.minimum(cls, ncls - 1)] + jnp.sum(within * onehot, axis=1), n)
+    # the spinning bodies in chunks of 128, those needing more than half the largest count first, so that most
+    # chunks hold bodies of similar counts: a chunk loops to its largest count and masks the others
+    # (body.rotate_free_batch). (Sorting by ceil log2 n_sub with a cumsum over (n0, 7) one-hot classes cost
+    # ~0.5 ms per step at 3e4 spheres, more than it saved.)
+    fast = spin & (2 * nsub > jnp.max(nsub))
+    cf, cs = jnp.cumsum(fast), jnp.cumsum(spin)
+    pos = jnp.where(fast, cf - 1, jnp.where(spin, cf[-1] + (cs - cf) - 1, n))
     ids = jnp.full(n, n, jnp.int32).at[pos].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
     m = jnp.sum(spin).astype(jnp.int32)
     B = min(n, 128)
@@ -1008,17 +1031,20 @@ def _agg_loop(engine, st, t_seg, nc_max):
     def body_fn(c):
         st, k, outs = c
         target = t_seg[k]
-        x, r, u = _sphere_pos(st)
+        # sphere positions once per step: without the barrier XLA fused _sphere_pos into each of its consumers
+        # and recomputed it there (at 3e4 spheres ~1 ms per consumer)
+        x, r, u = jax.lax.optimization_barrier(_sphere_pos(st))
         dsp = _mimg(x - st.x_ref, st.par["L"])
-        disp = jnp.sqrt(jnp.max(jnp.sum(dsp * dsp, axis=-1)))
-        st = jax.lax.cond((disp > 0.4 * skin) | (st.n_build == 0), lambda s: _agg_rebuild(engine, s, x, nc_max),
-                          lambda s: s, st)
-        dsp = _mimg(x - st.x_ref, st.par["L"])
-        disp = jnp.sqrt(jnp.max(jnp.sum(dsp * dsp, axis=-1)))
-        Om = jax.vmap(body.max_spin)(st.Pi, st.Ip)
+        # the squared displacements materialised before the max: fused into the reduction (a library kernel on
+        # CPU) the per-sphere arithmetic took ~1.6 ms at 3e4 spheres
+        disp = jnp.sqrt(jnp.max(jax.lax.optimization_barrier(_dot3(dsp, dsp))))
+        rebuild = (disp > 0.4 * skin) | (st.n_build == 0)
+        st = jax.lax.cond(rebuild, lambda s: _agg_rebuild(engine, s, x, nc_max), lambda s: s, st)
+        disp = jnp.where(rebuild, 0.0, disp)  # a rebuild sets x_ref = x
+        Om = _max_spin(st.Pi, st.Ip)
         acc = Om * Om * st.Rmax
         tstar, any_ev, s_ev, t_ev = _pair_scan(st, x, u, acc, tol)
-        spd = jnp.where(st.alive, jnp.sqrt(jnp.sum(st.V * st.V, axis=-1)) + Om * st.Rmax, 0.0)
+        spd = jnp.where(st.alive, jnp.sqrt(_dot3(st.V, st.V)) + Om * st.Rmax, 0.0)
         vmax = jnp.max(spd)
         dt_skin = jnp.where(vmax > 0, (0.5 * skin - disp) / jnp.where(vmax > 0, vmax, 1.0), jnp.inf)
         ommax = jnp.max(jnp.where(st.alive, Om, 0.0))
