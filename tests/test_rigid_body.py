@@ -255,6 +255,10 @@ def test_rotate_free_batch_equals_rotate_free_body_by_body(dt, n_sub, tol):
     np.testing.assert_allclose(np.linalg.norm(np.asarray(got[1]), axis=1), np.linalg.norm(np.asarray(Pi), axis=1),
                                rtol=1e-14)
     np.testing.assert_allclose(np.linalg.norm(np.asarray(got[0]), axis=1), 1.0, rtol=1e-15)
+    with pytest.raises(JaxcoagInputError, match="n_sub"):
+        B.rotate_free_batch(q, Pi, Ip, dt, jnp.zeros(n, jnp.int32))
+    with pytest.raises(JaxcoagInputError, match="shapes"):
+        B.rotate_free_batch(q[0], Pi[0], Ip[0], dt, 1)
 
 
 # --------------------------------------------------------------------------- A10.3 restitution

@@ -460,6 +460,11 @@ def rotate_free_batch(q, Pi, Ip, dt, n_sub):
 
     References: as :func:`rotate_free` (Dullweber, Leimkuhler & McLachlan 1997).
     """
+    _concrete_check(lambda v: v >= 1, n_sub, "rotate_free_batch: every `n_sub` must be an integer >= 1")
+    nb = jnp.shape(q)[0] if jnp.ndim(q) == 2 else -1
+    if jnp.shape(q) != (nb, 4) or jnp.shape(Pi) != (nb, 3) or jnp.shape(Ip) != (nb, 3):
+        raise JaxcoagInputError(f"rotate_free_batch: q must be (B, 4) and Pi, Ip (B, 3); got shapes {jnp.shape(q)}, "
+                                f"{jnp.shape(Pi)}, {jnp.shape(Ip)}.")
     Ipinv = _inv_moments(Ip)
     ns = jnp.broadcast_to(jnp.maximum(jnp.asarray(n_sub), 1), q.shape[:1])
     h = jnp.broadcast_to(_f64(dt), q.shape[:1]) / ns.astype(jnp.float64)
