@@ -269,10 +269,17 @@ def inertia_inv_space(q, Ip):
     return (A * _inv_moments(Ip)[None, :]) @ A.T
 
 
+def _dot3(a, b):
+    """``sum(a * b, axis=-1)`` over a trailing axis of 3, written out: on 10^4-10^5 rows XLA (CPU) turned the
+    reduction into a library kernel costing ~50 ns per row (the rigid box calls this at every step)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def kinetic_energy_rot(Pi, Ip):
-    """Rotational kinetic energy ``T = ½ Σ_k I_k ω_k² = ½ Σ_k Π_k² / I_k`` [erg] (R2)."""
+    """Rotational kinetic energy ``T = ½ Σ_k I_k ω_k² = ½ Σ_k Π_k² / I_k`` [erg] (R2); broadcasts over leading
+    axes."""
     Pi = _f64(Pi)
-    return 0.5 * jnp.sum(Pi * Pi * _inv_moments(Ip), axis=-1)
+    return 0.5 * _dot3(Pi * Pi, _inv_moments(Ip))
 
 
 def angular_momentum_space(q, Pi):
@@ -286,10 +293,12 @@ def max_spin(Pi, Ip):
     Because ``2T = Σ I_k ω_k² >= I_min |ω|²`` and ``T`` is conserved, this bounds the spin at all
     times; conservative advancement uses ``|d̈| <= 2 (Ω_a² R_max,a + Ω_b² R_max,b)``.
 
+    Broadcasts over leading axes (Pi, Ip of shape (..., 3)).
+
     References: Richardson (1995) eq. (2); Landau & Lifshitz §36.
     """
     Ip = _f64(Ip)
-    Imin = jnp.min(Ip, axis=-1)
+    Imin = jnp.minimum(jnp.minimum(Ip[..., 0], Ip[..., 1]), Ip[..., 2])
     two_t = 2.0 * kinetic_energy_rot(Pi, Ip)
     ok = Imin > 0
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, two_t / jnp.where(ok, Imin, 1.0), 0.0)), 0.0)

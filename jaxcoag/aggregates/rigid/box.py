@@ -33,7 +33,8 @@ Numerical scheme (one synchronized global time; all arrays have the fixed capaci
   ``ġ < 0`` is an event and is resolved alone (coagulation by :func:`~jaxcoag.aggregates.rigid.body.merge`,
   restitution by :func:`~jaxcoag.aggregates.rigid.body.restitute`). Rotation uses the symmetric splitting
   integrator of :func:`~jaxcoag.aggregates.rigid.body.rotate_free` with ``|ω| h <= 0.02`` per body
-  (:func:`~jaxcoag.aggregates.rigid.body.rotate_free_batch`, bodies grouped by their substep count).
+  (:func:`~jaxcoag.aggregates.rigid.body.rotate_free_batch`, the bodies needing more than half the largest
+  substep count first).
 * Neighbour structure: a Verlet list with cutoff ``R_s + R_t + skin`` (pairs within one aggregate excluded),
   at most ``K`` partners per sphere, built from a uniform cell grid (cells no smaller than the cutoff; the
   27 surrounding cells are searched) in O(n0), or by an all-pairs scan when the cutoff exceeds L/3. It is
@@ -361,19 +362,7 @@ def _wrap(x, L):
     return jnp.where(x >= L, 0.0, x)
 
 
-def _dot3(a, b):
-    """``sum(a * b, axis=-1)`` over a trailing axis of 3, written out: XLA (CPU) turned such tiny reductions over
-    10^4-10^5 rows into library reduction kernels costing ~50 ns per row (1-2 ms per pass at 3e4 spheres)."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-
-
-def _max_spin(Pi, Ip):
-    """:func:`~jaxcoag.aggregates.rigid.body.max_spin` of every slot, with the 3-component sums written out."""
-    inv = body._inv_moments(Ip)
-    imin = jnp.minimum(jnp.minimum(Ip[:, 0], Ip[:, 1]), Ip[:, 2])
-    two_t = 2.0 * (0.5 * _dot3(Pi * Pi, inv))
-    ok = imin > 0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, two_t / jnp.where(ok, imin, 1.0), 0.0)), 0.0)
+_dot3 = body._dot3
 
 
 def _sphere_pos(st):
@@ -1041,7 +1030,7 @@ def _agg_loop(engine, st, t_seg, nc_max):
         rebuild = (disp > 0.4 * skin) | (st.n_build == 0)
         st = jax.lax.cond(rebuild, lambda s: _agg_rebuild(engine, s, x, nc_max), lambda s: s, st)
         disp = jnp.where(rebuild, 0.0, disp)  # a rebuild sets x_ref = x
-        Om = _max_spin(st.Pi, st.Ip)
+        Om = body.max_spin(st.Pi, st.Ip)
         acc = Om * Om * st.Rmax
         tstar, any_ev, s_ev, t_ev = _pair_scan(st, x, u, acc, tol)
         spd = jnp.where(st.alive, jnp.sqrt(_dot3(st.V, st.V)) + Om * st.Rmax, 0.0)
