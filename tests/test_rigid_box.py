@@ -152,6 +152,11 @@ def test_flat_pair_build_equals_brute_force():
     assert k == len(ref) and not bool(over)
     assert sorted(got) == ref
     assert np.all(np.diff(np.asarray(pi)[:k]) >= 0)  # row-major: rows in order
+    # the accelerator's block width (box._lanes: 2^20, one block holds every candidate): the same list
+    wide = build(jnp.asarray(x), jnp.asarray(Rs), jnp.asarray(grp), L, skin, int(deg.max()), P, nc, 1 << 20)
+    assert int(wide[2]) == k and not bool(wide[3])
+    assert np.array_equal(np.asarray(wide[0])[:k], np.asarray(pi)[:k])
+    assert np.array_equal(np.asarray(wide[1])[:k], np.asarray(pj)[:k])
     # one partner fewer than the busiest sphere has: overflow; a pair capacity below the count: overflow too
     assert bool(build(jnp.asarray(x), jnp.asarray(Rs), jnp.asarray(grp), L, skin, int(deg.max()) - 1, P, nc, 64)[3])
     short = build(jnp.asarray(x), jnp.asarray(Rs), jnp.asarray(grp), L, skin, int(deg.max()), len(ref) - 1, nc, 64)
