@@ -92,6 +92,36 @@ def contact_one(n_half, dim, steps, material, v_imp):
     return row
 
 
+def profile_rigid(n0, window_collisions, outdir, seed=1):
+    """A ``jax.profiler`` trace (with a Perfetto JSON) of a model (v) window at N = n0, after a compiling call."""
+    from jaxcoag.aggregates import rigid
+
+    L = 10.0 * (n0 / 9000.0) ** (1.0 / 3.0)
+    box = rigid.box_model("v", n0=n0, box=L, v0=13.0, key=jax.random.key(seed))
+    r1 = rigid.run(box, jnp.array([100.0 / n0]))
+    jax.block_until_ready(r1.outs)
+    with jax.profiler.trace(os.path.join(outdir, "rigid"), create_perfetto_trace=True):
+        r2 = rigid.run(r1, jnp.array([(100.0 + window_collisions) / n0]))
+        jax.block_until_ready(r2.outs)
+    return int(np.asarray(r2.outs["n_steps"])[-1]) - int(np.asarray(r1.outs["n_steps"])[-1])
+
+
+def profile_contact(n_half, dim, steps, material, v_imp, outdir):
+    """A ``jax.profiler`` trace of ``steps`` DEM steps of the head-on BCCA pair, after a compiling call."""
+    from jaxcoag.aggregates.contact import dem
+
+    x, v = CT.make_system(n_half, dim, material, v_imp)
+    dt = CT.DT_TC * float(np.asarray(material.t_c))
+    n = x.shape[0]
+    st0 = dem.init_state(CT._pad3(x), CT._pad3(v), np.zeros((n, 3)), material, dim=dim, skin=CT.SKIN)
+    st, _ = dem.integrate(st0, material, steps, dt=dt, skin=CT.SKIN, chunk=steps)
+    jax.block_until_ready(st.x)
+    with jax.profiler.trace(os.path.join(outdir, "contact"), create_perfetto_trace=True):
+        st, _ = dem.integrate(st0, material, steps, dt=dt, skin=CT.SKIN, chunk=steps)
+        jax.block_until_ready(st.x)
+    return steps
+
+
 def sweep(n_half, dim, steps, material, v0):
     speeds = np.linspace(3.0, 10.0, 8) * v0
     xs, vs = [], []
@@ -114,7 +144,9 @@ def main(argv=None):
     ap.add_argument("--contact", default=None, help="comma list dim:n_half:steps (default 2:256:2000,"
                     "3:1024:1000,3:8192:1000)")
     ap.add_argument("--sweep-steps", type=int, default=None, help="steps per sweep member (default 500)")
-    ap.add_argument("--parts", default="contact,sweep,rigid", help="which parts, in this order")
+    ap.add_argument("--parts", default="rigid,contact,sweep", help="which parts, in this order (also: profile, "
+                    "traces of the largest rigid size's window and of the last contact system into --profile-dir)")
+    ap.add_argument("--profile-dir", default="jax_profile", help="directory of the profile part's traces")
     ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/gpu_aggregates.json)")
     a = ap.parse_args(argv)
     from jaxcoag.aggregates.contact import materials
@@ -170,6 +202,14 @@ def main(argv=None):
                           f"({row['wall_per_step_ms']:.3f} ms/step), {row['collisions']} collisions, "
                           f"{row['rebuilds']} rebuilds, {row['wall_per_time']:.4g} s per unit time, "
                           f"{row['status']}", flush=True)
+            elif part == "profile":
+                nr = profile_rigid(max(sizes), min(a.window, 200.0), a.profile_dir)
+                dim, nh, _ = contact[-1]
+                nc = profile_contact(nh, dim, 200, mat, 5.7 * v0, a.profile_dir)
+                rec["profile"] = dict(dir=a.profile_dir, rigid_n0=max(sizes), rigid_steps=nr,
+                                      contact=f"{dim}d {nh}+{nh}", contact_steps=nc)
+                save()
+                print(f"profile: traces in {a.profile_dir} (rigid {nr} steps, contact {nc} steps)", flush=True)
             else:
                 raise SystemExit(f"--parts: unknown part {part!r} (contact, sweep, rigid)")
         except Exception as e:  # keep the other parts' numbers; the error goes into the JSON
