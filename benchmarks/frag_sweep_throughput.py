@@ -8,7 +8,7 @@ Members: v_frag = 6 ... 14 m/s (8 values), the ``Shattering.v_frag`` leaf of the
 after its compile: ``loop`` (a Python loop of one jitted solve), ``vmap`` (one ``jax.vmap``-ed solve of all
 members). Also reports steps per member and that the vmapped members equal the looped ones.
 
-    python benchmarks/frag_sweep_throughput.py [--quick] [--members 8]
+    python benchmarks/frag_sweep_throughput.py [--quick] [--members 8] [--out PATH]
 
 ``--quick``: ``runner.quick_config`` (coarse grid). Writes benchmarks/results/frag_sweep_throughput[_quick].json.
 """
@@ -43,6 +43,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--members", type=int, default=8)
+    ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/frag_sweep_throughput"
+                    "[_quick].json)")
     a = ap.parse_args(argv)
     cfg = cfgmod.default()
     if a.quick:
@@ -80,8 +82,10 @@ def main(argv=None):
     print_table(rows, ["mode", "members", "wall_s", "per_member_s", "first_call_s", "steps"],
                 f"{a.members}-member v_frag sweep of the {'quick' if a.quick else 'default'} run box")
     print(f"throughput vmap / loop = {ratio:.3g} (goal >= 4); max |vmap - loop| / max = {diff:.2e}")
-    path = ROOT / "benchmarks" / "results" / ("frag_sweep_throughput" + ("_quick" if a.quick else "") + ".json")
+    path = pathlib.Path(a.out) if a.out else (ROOT / "benchmarks" / "results" /
+                                              ("frag_sweep_throughput" + ("_quick" if a.quick else "") + ".json"))
     write_json(path, dict(benchmark="frag_sweep_throughput", quick=a.quick, machine=machine_info(),
+                          device=dict(backend=jax.default_backend(), device=str(jax.devices()[0].device_kind)),
                           v_frag_cm_s=np.asarray(vf), rows=rows, throughput_ratio_vmap_over_loop=ratio,
                           max_rel_diff_vmap_loop=diff, status_codes=[int(x[3]) for x in loop]))
     print(f"wrote {path}")

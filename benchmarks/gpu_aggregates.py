@@ -122,6 +122,15 @@ def profile_contact(n_half, dim, steps, material, v_imp, outdir):
     return steps
 
 
+def outcome(n_half, dim, v_imp_v0, material):
+    """``contact.collide`` of two independent BCCAs to its default end (the outcome), timed; with the timing of a
+    1000-step run of the same collide (``contact_throughput.run_collide``)."""
+    v0 = float(np.asarray(material.v0))
+    row = CT.run_collide(n_half, dim, material, v_imp_v0 * v0, n_steps=1000, full=True)
+    row.update(system=f"{dim}d {n_half}+{n_half}", v_imp_v0=v_imp_v0)
+    return row
+
+
 def sweep(n_half, dim, steps, material, v0):
     speeds = np.linspace(3.0, 10.0, 8) * v0
     xs, vs = [], []
@@ -145,7 +154,9 @@ def main(argv=None):
                     "3:1024:1000,3:8192:1000)")
     ap.add_argument("--sweep-steps", type=int, default=None, help="steps per sweep member (default 500)")
     ap.add_argument("--parts", default="rigid,contact,sweep", help="which parts, in this order (also: profile, "
-                    "traces of the largest rigid size's window and of the last contact system into --profile-dir)")
+                    "traces of the largest rigid size's window and of the last contact system into --profile-dir; "
+                    "outcome, --outcome's collision run to its outcome)")
+    ap.add_argument("--outcome", default="3:8192:12.5", help="collision of the outcome part, dim:n_half:v_imp/v_0")
     ap.add_argument("--profile-dir", default="jax_profile", help="directory of the profile part's traces")
     ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/gpu_aggregates.json)")
     a = ap.parse_args(argv)
@@ -202,6 +213,14 @@ def main(argv=None):
                           f"({row['wall_per_step_ms']:.3f} ms/step), {row['collisions']} collisions, "
                           f"{row['rebuilds']} rebuilds, {row['wall_per_time']:.4g} s per unit time, "
                           f"{row['status']}", flush=True)
+            elif part == "outcome":
+                dim, nh, vv = a.outcome.split(":")
+                row = outcome(int(nh), int(dim), float(vv), mat)
+                rec["outcome"] = row
+                save()
+                print(f"outcome {row['system']} at {vv} v0: {row['outcome_s']:.1f} s, {row['outcome_steps']} steps, "
+                      f"clusters {row['outcome_cluster_sizes']}, r_g {row['outcome_r_g_r1']:.2f} r1, n_con "
+                      f"{row['outcome_n_contacts']:.3f}, {row['outcome_status']}", flush=True)
             elif part == "profile":
                 nr = profile_rigid(max(sizes), min(a.window, 200.0), a.profile_dir)
                 dim, nh, _ = contact[-1]

@@ -314,9 +314,13 @@ def _safe_pointers(n_i, n_j, phi, active):
 
 
 def _pair_sum(f_i, f_j, ci, cj, active, N):
-    """Per-monomer sums (N, k) of per-slot values: f_i (C, k) on monomer ci and f_j (C, k) on cj (one scatter)."""
+    """Per-monomer sums (N, k) of per-slot values: f_i (C, k) on monomer ci and f_j (C, k) on cj (one scatter).
+
+    Empty slots get the out-of-range id N, which ``segment_sum`` drops. (Summing them into a dummy row N, as
+    before, made every empty slot's update hit one address: on a GPU the atomic adds serialised, 0.32 ms of a
+    0.67 ms step at 8192 + 8192 monomers on an H200.)"""
     ids = jnp.concatenate([jnp.where(active, ci, N), jnp.where(active, cj, N)])
-    return jax.ops.segment_sum(jnp.concatenate([f_i, f_j], axis=0), ids, num_segments=N + 1)[:N]
+    return jax.ops.segment_sum(jnp.concatenate([f_i, f_j], axis=0), ids, num_segments=N)
 
 
 def _evaluate(x, ci, cj, active, n_i, n_j, phi, mat):
