@@ -16,7 +16,9 @@ State (:class:`DEMState`, fixed capacity, every field an array so that it checkp
   phi = phi_s n_c); new contacts take the lowest free slots. Every per-contact pass is O(C) = O(N): a monomer
   aggregate has about one contact per monomer, so a list of 2 (2-D) or 3 (3-D) slots per monomer is 3-4x
   shorter than a table of the largest coordination per monomer (6 / 12 slots, the layout before), and that
-  length is what a step costs (docs/design_notes.md, "DEM contact layout");
+  length is what a step costs (docs/design_notes.md, "DEM contact layout"). Since new contacts take the lowest
+  free slots, the used slots stay a prefix of the list: a step processes the smallest prefix (1.25 N, 2 N or C)
+  that holds them (:func:`_step`), so a tree-like aggregate costs ~1.25 N slots per step whatever the capacity;
 * a Verlet neighbour list ``nbr`` (N, K_nb) of partners j > i within 2 r1 + skin (skin = 0.1 r1 by default),
   rebuilt inside ``lax.cond`` when a monomer has moved more than skin/2 since the last build (under ``jax.vmap``
   the branch runs when any member needs it and is selected per member, so it stays a branch); the build is a
@@ -97,6 +99,7 @@ References: Wada, Tanaka, Suyama, Kimura & Yamamoto (2007, ApJ 661, 320) eqs. 1-
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 from typing import NamedTuple
@@ -639,8 +642,77 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
 
 
 # ------------------------------------------------------------------------------------------------- step
+#: per-slot fields of :class:`DEMState` with a leading axis of C slots; ``ev_f``, ``ev_i``, ``ev_j`` have 2C (the
+#: breakings' half, then the creations')
+_SLOT_FIELDS = ("ci", "cj", "active", "n_i", "n_j", "phi", "Uc", "Fc", "Mc1", "Mc2", "ev_t")
+_SLOT_FIELDS_2C = ("ev_f", "ev_i", "ev_j")
+#: slots kept free above the highest used slot when a prefix is chosen (new contacts of the step)
+_PREFIX_SLACK = 8
+#: lists shorter than this are always processed whole: each prefix size is another copy of the step to compile
+#: (~3-4 s on 2 cores), more than a short list's steps save
+_PREFIX_MIN_SLOTS = 1024
+
+
+def _prefix_sizes(n_mono: int, n_slots: int) -> tuple[int, ...]:
+    """Static slot-prefix sizes of the step: 1.25 N and 2 N (multiples of 8) where they are below C, then C.
+
+    An aggregate has about one contact per monomer (N - 1 in a tree, up to ~2 N compacted), and new contacts take
+    the lowest free slots, so the used slots stay a prefix of the list; a step that processes the prefix that holds
+    them instead of all C = capacity x N slots costs what a list of that length costs (3-D, capacity 3, a BCCA pair:
+    C = 3 N, the prefix 1.25 N). Lists of fewer than ``_PREFIX_MIN_SLOTS`` slots have the one size C."""
+    if n_slots < _PREFIX_MIN_SLOTS:
+        return (n_slots,)
+    return tuple(sorted({min(n_slots, 8 * -(-int(np.ceil(f * n_mono)) // 8)) for f in (1.25, 2.0)} | {n_slots}))
+
+
+def _take_prefix(st: DEMState, B: int) -> DEMState:
+    """The state with its contact list cut to the first B slots (the pending events of those slots kept)."""
+    C = st.ci.shape[0]
+    upd = {k: getattr(st, k)[:B] for k in _SLOT_FIELDS}
+    upd.update({k: jnp.concatenate([getattr(st, k)[:B], getattr(st, k)[C:C + B]]) for k in _SLOT_FIELDS_2C})
+    return dataclasses.replace(st, **upd)
+
+
+def _put_prefix(full: DEMState, part: DEMState, B: int) -> DEMState:
+    """``part`` (a step of :func:`_take_prefix`'s state) with its first B slots written back into ``full``'s list."""
+    C = full.ci.shape[0]
+    upd = {k: getattr(full, k).at[:B].set(getattr(part, k)) for k in _SLOT_FIELDS}
+    upd.update({k: getattr(full, k).at[:B].set(getattr(part, k)[:B]).at[C:C + B].set(getattr(part, k)[B:])
+                for k in _SLOT_FIELDS_2C})
+    return dataclasses.replace(part, **upd)
+
+
 def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
-    """One kick-drift-kick step (module docstring).
+    """One kick-drift-kick step (module docstring) over the prefix of the contact list that holds every used slot.
+
+    The used slots are the active contacts and the slots with a correction pending from the previous step; the
+    prefix is the smallest of :func:`_prefix_sizes` with ``_PREFIX_SLACK`` free slots above the highest used one
+    (chosen by the largest need of a ``jax.vmap`` batch). Slots above it are empty before and after the step, so
+    the step is :func:`_step_slots` on the prefix: the same contacts in the same slots, forces summed in the same
+    order. A step that creates more contacts than its prefix has free slots is taken again on the whole list (as
+    is a step whose used slots need the whole list). Returns the state after the step."""
+    N, C = st.x.shape[0], st.ci.shape[0]
+    sizes = _prefix_sizes(N, C)
+    if len(sizes) == 1:
+        return _step_slots(st, mat, dt, skin, cfg)
+    used = st.active | (st.ev_i[:C] < N) | (st.ev_i[C:] < N)
+    top = jnp.max(jnp.where(used, jnp.arange(1, C + 1), 0)) + _PREFIX_SLACK
+    k = _max_member(jnp.sum((jnp.asarray(sizes[:-1]) < top).astype(jnp.int32)))
+
+    def prefix(B):
+        def run(s):
+            part = _step_slots(_take_prefix(s, B), mat, dt, skin, cfg)
+            spilled = ((part.flags & FLAG_CONTACTS) != 0) & ((s.flags & FLAG_CONTACTS) == 0)
+            return _put_prefix(s, part, B), spilled
+
+        return run
+
+    out, whole = jax.lax.switch(k, [prefix(B) for B in sizes[:-1]] + [lambda s: (s, jnp.ones((), bool))], st)
+    return _cond_members(whole, lambda o: _step_slots(o[0], mat, dt, skin, cfg), lambda o: o[1], (st, out))
+
+
+def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
+    """One kick-drift-kick step (module docstring) over every slot of ``st``'s contact list.
 
     Every per-contact quantity of the monomers (position, displacement dt v, rotation angle dt w and its Rodrigues
     coefficients) is gathered once per step for both ends of every slot (two gathers of an (N, 11) array); the
