@@ -269,11 +269,12 @@ def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
     the whole list (prefixes switched off): the same contacts, positions, velocities and energy ledger to
     round-off. 'chains': 40 contacts form in one step, more than the 1.25 N prefix has free (78 of 104 slots
     used), so the step spills to the whole list; 'bcca3d': a 3-D 32 + 32 BCCA collision at 10 v0 with
-    creations and breakings through prefixes 1.25 N and 2 N."""
+    creations and breakings through the prefixes."""
     monkeypatch.setattr(dem, "_PREFIX_MIN_SLOTS", 64)  # small lists get the prefixes too
     if system == "chains":
+        monkeypatch.setattr(dem, "_PREFIX_FRACTIONS", (1.25,))  # one prefix: a shorter compile
         st0 = _two_chains(40, 0.05 * R1, 2.0 * V0)
-        n_steps = 400
+        n_steps = 300
         assert dem._prefix_sizes(80, st0.ci.shape[0]) == (104, 160)
     else:
         a = np.asarray(bcca(32, jax.random.key(3), 3, material=MAT).positions)
@@ -282,7 +283,7 @@ def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
         x, v = head_on_pair(a, b, 10.0 * V0, R1)
         st0 = dem.init_state(x, v, np.zeros_like(x), MAT, dim=3)
         n_steps = 8000
-        assert dem._prefix_sizes(64, st0.ci.shape[0]) == (80, 128, 192)
+        assert dem._prefix_sizes(64, st0.ci.shape[0]) == (80, 104, 128, 192)
     runs = {}
     for label, min_slots in (("prefix", 64), ("whole", 10**9)):
         monkeypatch.setattr(dem, "_PREFIX_MIN_SLOTS", min_slots)

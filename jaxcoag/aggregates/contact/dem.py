@@ -17,8 +17,9 @@ State (:class:`DEMState`, fixed capacity, every field an array so that it checkp
   aggregate has about one contact per monomer, so a list of 2 (2-D) or 3 (3-D) slots per monomer is 3-4x
   shorter than a table of the largest coordination per monomer (6 / 12 slots, the layout before), and that
   length is what a step costs (docs/design_notes.md, "DEM contact layout"). Since new contacts take the lowest
-  free slots, the used slots stay a prefix of the list: a step processes the smallest prefix (1.25 N, 2 N or C)
-  that holds them (:func:`_step`), so a tree-like aggregate costs ~1.25 N slots per step whatever the capacity;
+  free slots, the used slots stay a prefix of the list: a step processes the smallest prefix (1.25 N, 1.625 N,
+  2 N or C) that holds them (:func:`_step`), so a tree-like aggregate costs ~1.25 N slots per step whatever the
+  capacity;
 * a Verlet neighbour list ``nbr`` (N, K_nb) of partners j > i within 2 r1 + skin (skin = 0.1 r1 by default),
   rebuilt inside ``lax.cond`` when a monomer has moved more than skin/2 since the last build (under ``jax.vmap``
   the branch runs when any member needs it and is selected per member, so it stays a branch); the build is a
@@ -268,13 +269,10 @@ def _max_member_vmap(axis_size, in_batched, index):
 
 def _cond_members(pred, true_fn, false_fn, operand):
     """``lax.cond(pred, true_fn, false_fn, operand)`` with the same result per member under ``jax.vmap``, but
-    ``true_fn`` runs only when some member's ``pred`` is True (then selected per member against ``false_fn``)."""
-
-    def either(op):
-        a, b = true_fn(op), false_fn(op)
-        return jax.tree_util.tree_map(lambda u, w: jnp.where(pred, u, w), a, b)
-
-    return jax.lax.cond(_any_member(pred), either, false_fn, operand)
+    ``true_fn`` runs only when some member's ``pred`` is True (then selected per member against ``false_fn``: the
+    inner ``cond`` on the batched ``pred`` is a select of both branches under ``vmap``, and a plain branch
+    without it, where a select of the two branches' results cost a pass over every output)."""
+    return jax.lax.cond(_any_member(pred), lambda op: jax.lax.cond(pred, true_fn, false_fn, op), false_fn, operand)
 
 
 # ------------------------------------------------------------------------------------------------- geometry
@@ -648,21 +646,25 @@ _SLOT_FIELDS = ("ci", "cj", "active", "n_i", "n_j", "phi", "Uc", "Fc", "Mc1", "M
 _SLOT_FIELDS_2C = ("ev_f", "ev_i", "ev_j")
 #: slots kept free above the highest used slot when a prefix is chosen (new contacts of the step)
 _PREFIX_SLACK = 8
+#: prefix sizes in units of N (a tree has N - 1 contacts; a collision compacts it to ~1.5 N in 2-D)
+_PREFIX_FRACTIONS = (1.25, 1.625, 2.0)
 #: lists shorter than this are always processed whole: each prefix size is another copy of the step to compile
 #: (~3-4 s on 2 cores), more than a short list's steps save
 _PREFIX_MIN_SLOTS = 1024
 
 
 def _prefix_sizes(n_mono: int, n_slots: int) -> tuple[int, ...]:
-    """Static slot-prefix sizes of the step: 1.25 N and 2 N (multiples of 8) where they are below C, then C.
+    """Static slot-prefix sizes of the step: 1.25 N, 1.625 N and 2 N (multiples of 8) below C, then C.
 
     An aggregate has about one contact per monomer (N - 1 in a tree, up to ~2 N compacted), and new contacts take
     the lowest free slots, so the used slots stay a prefix of the list; a step that processes the prefix that holds
     them instead of all C = capacity x N slots costs what a list of that length costs (3-D, capacity 3, a BCCA pair:
-    C = 3 N, the prefix 1.25 N). Lists of fewer than ``_PREFIX_MIN_SLOTS`` slots have the one size C."""
-    if n_slots < _PREFIX_MIN_SLOTS:
+    C = 3 N, the prefix 1.25 N). Lists of fewer than ``_PREFIX_MIN_SLOTS`` slots have the one size C, and so do
+    runs on an accelerator (read at trace time), where the slot passes are parallel and each branch of the
+    dispatch is a host round trip (the GPU timings of benchmarks/gpu_aggregates.py are of the whole list)."""
+    if n_slots < _PREFIX_MIN_SLOTS or jax.default_backend() != "cpu":
         return (n_slots,)
-    return tuple(sorted({min(n_slots, 8 * -(-int(np.ceil(f * n_mono)) // 8)) for f in (1.25, 2.0)} | {n_slots}))
+    return tuple(sorted({min(n_slots, 8 * -(-int(np.ceil(f * n_mono)) // 8)) for f in _PREFIX_FRACTIONS} | {n_slots}))
 
 
 def _take_prefix(st: DEMState, B: int) -> DEMState:
@@ -707,8 +709,14 @@ def _step(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
 
         return run
 
-    out, whole = jax.lax.switch(k, [prefix(B) for B in sizes[:-1]] + [lambda s: (s, jnp.ones((), bool))], st)
-    return _cond_members(whole, lambda o: _step_slots(o[0], mat, dt, skin, cfg), lambda o: o[1], (st, out))
+    def whole(s):
+        return _step_slots(s, mat, dt, skin, cfg)
+
+    def prefixes(s):
+        out, spilled = jax.lax.switch(k, [prefix(B) for B in sizes[:-1]], s) if len(sizes) > 2 else prefix(sizes[0])(s)
+        return _cond_members(spilled, lambda o: whole(o[0]), lambda o: o[1], (s, out))
+
+    return jax.lax.cond(k == len(sizes) - 1, whole, prefixes, st)
 
 
 def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
