@@ -366,9 +366,9 @@ _dot3 = body._dot3
 
 
 def _lanes(cpu, accelerator):
-    """Width of a blocked pass (pair build, rotation chunks): ``cpu`` on a CPU, where blocks that fit the cache
-    are fastest, ``accelerator`` on a GPU/TPU, where each block costs kernel launches and wide blocks fill the
-    chip. Chosen at trace time from ``jax.default_backend()``."""
+    """Width of a blocked pass (pair build, pair scan, rotation chunks): ``cpu`` on a CPU, where blocks that fit
+    the cache are fastest, ``accelerator`` on a GPU/TPU, where each block costs kernel launches and wide blocks
+    fill the chip. Chosen at trace time from ``jax.default_backend()``."""
     return cpu if jax.default_backend() == "cpu" else accelerator
 
 
@@ -995,8 +995,8 @@ def _agg_advance(engine, st, dt, Om):
     # exactly), so the work follows them
     spin = st.alive & ((st.nmem > 1) | jnp.any(st.Pi != 0, axis=-1))
     nsub = jnp.where(spin, jnp.clip(jnp.ceil(Om * dt / 0.02), 1, engine.n_rot), 0).astype(jnp.int32)
-    # the spinning bodies in chunks of 128, those needing more than half the largest count first, so that most
-    # chunks hold bodies of similar counts: a chunk loops to its largest count and masks the others
+    # the spinning bodies in chunks (128 on a CPU: _lanes), those needing more than half the largest count first,
+    # so that most chunks hold bodies of similar counts: a chunk loops to its largest count and masks the others
     # (body.rotate_free_batch). (Sorting by ceil log2 n_sub with a cumsum over (n0, 7) one-hot classes cost
     # ~0.5 ms per step at 3e4 spheres, more than it saved.)
     fast = spin & (2 * nsub > jnp.max(nsub))
