@@ -28,7 +28,6 @@ import argparse
 import os
 import pathlib
 import sys
-import time
 import traceback
 
 import numpy as np
@@ -52,31 +51,11 @@ def device_record():
 
 
 def rigid_one(n0, window_collisions, seed=1):
-    """Model (v) at N = n0: first call to t_a = 100 / n0, timed continuation over window_collisions / n0."""
-    from jaxcoag.aggregates import rigid
+    """Model (v) at N = n0: first call to t_a = 100 / n0, timed continuation over window_collisions / n0
+    (``rigid_scaling.timed``)."""
+    from benchmarks import rigid_scaling
 
-    L = 10.0 * (n0 / 9000.0) ** (1.0 / 3.0)
-    t0 = time.perf_counter()
-    box = rigid.box_model("v", n0=n0, box=L, v0=13.0, key=jax.random.key(seed))
-    jax.block_until_ready(box)
-    setup = time.perf_counter() - t0
-    t_a = 100.0 / n0
-    t0 = time.perf_counter()
-    r1 = rigid.run(box, jnp.array([t_a]))
-    jax.block_until_ready(r1.outs)
-    first = time.perf_counter() - t0
-    dt = window_collisions / n0
-    t0 = time.perf_counter()
-    r2 = rigid.run(r1, jnp.array([t_a + dt]))
-    jax.block_until_ready(r2.outs)
-    wall = time.perf_counter() - t0
-    d = {k: int(np.asarray(r2.outs[k])[-1]) - int(np.asarray(r1.outs[k])[-1]) for k in ("n_steps", "n_c", "n_build")}
-    return dict(n0=n0, L=L, setup_s=setup, t_a=t_a, first_call_s=first, window=dt, wall_s=wall,
-                steps=d["n_steps"], collisions=d["n_c"], rebuilds=d["n_build"], wall_per_time=wall / dt,
-                wall_per_step_ms=1e3 * wall / max(d["n_steps"], 1),
-                wall_per_collision_ms=1e3 * wall / max(d["n_c"], 1), steps_per_time=d["n_steps"] / dt,
-                n_aggregates_end=int(np.asarray(r2.outs["n_aggregates"])[-1]),
-                status=r2.status_message or "successful")
+    return rigid_scaling.timed(n0, seed, t_a=100.0 / n0, dt=window_collisions / n0)
 
 
 def contact_one(n_half, dim, steps, material, v_imp):

@@ -40,22 +40,26 @@ def window(n0):
     return max(0.01, 200.0 / n0)
 
 
-def timed(n0, seed=1):
-    """Compile + short run to T_A, then the timed continuation over window(n0) (module docstring)."""
+def timed(n0, seed=1, t_a=T_A, dt=None):
+    """Compile + short run to t_a, then the timed continuation over dt (default window(n0); module docstring).
+    Also reports ``setup_s``, the wall time of ``box_model`` (the random placement of n0 spheres)."""
     L = 10.0 * (n0 / 9000.0) ** (1.0 / 3.0)
-    box = rigid.box_model("v", n0=n0, box=L, v0=V0, key=jax.random.key(seed))
     t0 = time.perf_counter()
-    r1 = rigid.run(box, jnp.array([T_A]))
+    box = rigid.box_model("v", n0=n0, box=L, v0=V0, key=jax.random.key(seed))
+    jax.block_until_ready(box)
+    setup = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    r1 = rigid.run(box, jnp.array([t_a]))
     jax.block_until_ready(r1.outs)
     first = time.perf_counter() - t0
-    dt = window(n0)
+    dt = window(n0) if dt is None else dt
     t0 = time.perf_counter()
-    r2 = rigid.run(r1, jnp.array([T_A + dt]))
+    r2 = rigid.run(r1, jnp.array([t_a + dt]))
     jax.block_until_ready(r2.outs)
     wall = time.perf_counter() - t0
     d = {k: int(np.asarray(r2.outs[k])[-1]) - int(np.asarray(r1.outs[k])[-1])
          for k in ("n_steps", "n_c", "n_build")}
-    return dict(n0=n0, L=L, t_a=T_A, window=dt, first_call_s=first, wall_s=wall, steps=d["n_steps"],
+    return dict(n0=n0, L=L, setup_s=setup, t_a=t_a, first_call_s=first, window=dt, wall_s=wall, steps=d["n_steps"],
                 collisions=d["n_c"], rebuilds=d["n_build"], wall_per_time=wall / dt,
                 wall_per_step_ms=1e3 * wall / max(d["n_steps"], 1), wall_per_collision_ms=1e3 * wall / max(d["n_c"], 1),
                 steps_per_time=d["n_steps"] / dt, n_aggregates_end=int(np.asarray(r2.outs["n_aggregates"])[-1]),
