@@ -85,7 +85,9 @@ def test_blocked_refresh_equals_dense_row_sums():
 def test_blocked_incremental_update_after_events_equals_refresh():
     """(slow: ~20 s of compile; every default Monte Carlo run goes through the same update, checked
     there against analytic solutions.) Ten executed events (random pairs, own pairs, deduplicated products, dying donors) with the
-    blocked incremental update; the row sums then equal a fresh dense computation."""
+    blocked incremental update; the row sums then equal a fresh dense computation. Both ways the update takes a
+    touched row's old rates are used: the scaled new rate (w_old/w_new) and the full formula (a donor that lived
+    before and after with a fractional multiplicity or a new zoom)."""
     cfg = _cfg()
     st = _state(seed=1)
     R, s = _dense(st)
@@ -97,20 +99,33 @@ def test_blocked_incremental_update_after_events_equals_refresh():
         st2, _ = RUN._inc_update(cfg, P, old, st2, T, Tm)
         return st2
 
+    dense = jax.jit(_dense)
     live = np.flatnonzero(np.asarray(st.valid))
     rng = np.random.default_rng(3)
     pairs = [(live[0], live[0]), (live[-1], live[3])] + [tuple(rng.choice(live, 2)) for _ in range(8)]
+    # a donor with 1 < w < 2 as the lower-zoom member (it gives one group): it lives on with w < 1
+    w_, z_ = np.asarray(st.w), np.asarray(st.z)
+    t = next(x for x in live if 1.0 < w_[x] < 2.0 and np.any(z_[live] > z_[x]))
+    pairs.insert(1, (t, next(x for x in live if z_[x] > z_[t])))
+    kinds = set()
     for k, (a, b) in enumerate(pairs):
         v = np.asarray(st.valid)
         if not (v[a] and v[b]):
             continue
+        w0, z0 = np.asarray(st.w), np.asarray(st.z)
         st = event(st, jnp.int32(a), jnp.int32(b), jax.random.key(k))
+        w1, z1, v1 = np.asarray(st.w), np.asarray(st.z), np.asarray(st.valid)
+        for t in {a, b}:   # the donors: which way _inc_update took their old rates
+            if v[t] and v1[t]:
+                kinds.add("scaled" if (z0[t] == z1[t] and w0[t] >= 1 and w1[t] >= 1) else "full formula")
         assert int(st.ns) == int(np.sum(np.asarray(st.valid)))
         assert int(st.hi) >= int(np.max(np.flatnonzero(np.asarray(st.valid)))) + 1
+        # after every event (a wrong old rate of one row shows at once; later events overwrite much of it)
+        Rd, sd = dense(st)
+        got = np.asarray(st.R) * np.exp(float(st.s) - float(sd))
+        np.testing.assert_allclose(got, np.asarray(Rd), rtol=1e-9, atol=1e-12, err_msg=f"event {k}")
     assert not bool(st.dirty)
-    Rd, sd = _dense(st)
-    got = np.asarray(st.R) * np.exp(float(st.s) - float(sd))
-    np.testing.assert_allclose(got, np.asarray(Rd), rtol=1e-9, atol=1e-12)
+    assert kinds == {"scaled", "full formula"}, kinds
 
 
 @pytest.mark.parametrize("which", ["row", "partner"])

@@ -124,7 +124,7 @@ def log_rate_tile(logK, ia, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, val
     a_low = za <= zb
     lphi = jnp.minimum(0.0, jnp.minimum(jnp.where(a_low, lwa, lwa + ne_ln2), jnp.where(a_low, lw + ne_ln2, lw)))
     lphi = jnp.where(jnp.isfinite(lphi), lphi, 0.0)
-    off = lwa + lw + (zmin + ne).astype(dt) * LN2 + logK - LN2 - lphi
+    a_off = lwa + lw + (zmin + ne).astype(dt) * LN2
     # diagonal (per a)
     wa = w_a[:, None]
     lg = lwa + za.astype(dt) * LN2
@@ -139,9 +139,13 @@ def log_rate_tile(logK, ia, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, val
     d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2 - lphi_aa, -jnp.inf)
     # per-row values: the barrier makes XLA compute their log/expm1 once per row, not fused into every entry
     dg = jax.lax.optimization_barrier(jnp.where(za >= 1, d_grouped, d_single))
-    diag = dg + logK
-    out = jnp.where(ia[:, None] == ib[None, :], diag, off)
-    return jnp.where(valid_a[:, None] & valid_b[None, :], out, -jnp.inf)
+    # ln K enters once, after the selects: a select with ln K (or anything computed from it) as an operand
+    # keeps XLA-CPU from vectorising the fused loop (Sum kernel, (3, 4096) tiles: 11.7 against 3.2 + 1.9 ns per
+    # entry for the kernel and the rate apart). Subtracting the selected zeros keeps every value bitwise that of
+    # ((a_off + ln K) - ln 2) - ln phi off the diagonal and dg + ln K on it.
+    on = ia[:, None] == ib[None, :]
+    out = (jnp.where(on, dg, a_off) + logK) - jnp.where(on, 0.0, LN2) - jnp.where(on, 0.0, lphi)
+    return out + jnp.where(valid_a[:, None] & valid_b[None, :], 0.0, -jnp.inf)
 
 
 def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):

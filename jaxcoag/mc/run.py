@@ -283,30 +283,35 @@ def _props(arrays, T):
 
 def _pick_partner(cfg, p, st, a, u_blk, u_in):
     """Partner b of the selected row a, ∝ Λ'_{a,b} over the active prefix (blocked; the row is
-    never formed over the capacity): block log-sums, one block, the slot within it."""
+    never formed over the capacity): block sums, one block, the slot within it.
+
+    The weights are exp(ln Λ'_ab − s_a) with s_a = ln(R_a e^s), the row's own total (R holds the row
+    sums scaled by e^-s), so they sum to ~1: one exponential per entry and no max pass (a block
+    log-sum-exp cost a max and a sum pass per block). R_a is the row's sum up to the round-off of the
+    incremental updates, far from the e^709 that would overflow a weight.
+    """
     B, S = _B(cfg), cfg.capacity
     a1 = jnp.reshape(a, (1,)).astype(jnp.int32)
     la, pa, wa, za, va = _props(_arrays(st), a1)
+    Ra = st.R[a]
+    s_a = jnp.log(jnp.where((Ra > 0) & jnp.isfinite(Ra), Ra, 1.0)) + st.s
 
-    def row(start, idx):
+    def wts(start, idx, fresh):   # (no select on the row: see rates.log_rate_tile)
         lm, ps = _sl(st.logm, start, B), _sl(st.psi, start, B)
         logK = log_kernel_tile(p["kernel"], la, pa, lm, ps)
-        return log_rate_tile(logK, a1, la, wa, za, va, idx, lm, _sl(st.w, start, B), _sl(st.z, start, B),
-                             _sl(st.valid, start, B), p["log2_feps"], cfg.rounding)[0]
+        L = log_rate_tile(logK, a1, la, wa, za, va, idx, lm, _sl(st.w, start, B), _sl(st.z, start, B),
+                          _sl(st.valid, start, B) & fresh, p["log2_feps"], cfg.rounding)[0]
+        return jnp.exp(L - s_a)
 
     def body(k, start, idx, fresh, c):
-        return c.at[k].set(jax.nn.logsumexp(jnp.where(fresh, row(start, idx), -jnp.inf)))
+        return c.at[k].set(jnp.sum(wts(start, idx, fresh)))
 
-    lse = _fold(cfg, st.hi, body, jnp.full((_nblocks(cfg),), -jnp.inf))
-    mx = jnp.max(lse)
-    wb = jnp.where(jnp.isfinite(lse), jnp.exp(lse - jnp.where(jnp.isfinite(mx), mx, 0.0)), 0.0)
-    kb = _pick(u_blk, wb).astype(jnp.int32)
+    bs = _fold(cfg, st.hi, body, jnp.zeros((_nblocks(cfg),), jnp.float64))
+    kb = _pick(u_blk, bs).astype(jnp.int32)
     start = jnp.minimum(kb * B, S - B)
     idx = start + jnp.arange(B, dtype=jnp.int32)
     fresh = (idx >= kb * B) & (idx < st.hi)
-    L = jnp.where(fresh, row(start, idx), -jnp.inf)
-    lm = jnp.max(L)
-    j = _pick(u_in, jnp.where(fresh, jnp.exp(L - jnp.where(jnp.isfinite(lm), lm, 0.0)), 0.0))
+    j = _pick(u_in, wts(start, idx, fresh))
     return (start + j).astype(jnp.int32)
 
 
@@ -331,17 +336,27 @@ def _patch(x_b, idx, slots, values):
 def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     """Incremental row-sum update for the touched slots T (rate design B, docs/design_notes.md).
 
-    One blocked pass over the active prefix [0, hi): for every touched slot t and every slot b the
-    kernel K(m_t, m_b) is evaluated once and serves both the old and the new rate (a slot keeps
-    its mass while it lives: donors and deduplicated products keep theirs, new products take a
-    slot that was free before the event), so the per-entry work is one kernel value, two rate
-    formulas (arithmetic on ln K) and two exponentials. O(hi) work, no S-slot copy of its own (docs/design_notes.md).
+    One blocked pass over the active prefix [0, hi). For every touched slot t and every slot b it
+    evaluates one kernel value, one rate formula and one exponential: X_tb = exp(ln Λ'_tb − s) with
+    the *effective* row values of t (the new ones where t lives after the event, else the old ones).
+    A slot keeps its mass while it lives (donors and deduplicated products keep theirs, new products
+    take a slot that was free before the event), and Λ'_tb is proportional to w_t wherever the zoom
+    z_t is unchanged and no event fraction phi < 1 involves t (w_t >= 1 before and after,
+    rates.log_rate_tile), so off the diagonal
 
-    ``old`` (:class:`_Old`) holds the pre-event values of the slots T only; every other slot kept its
-    values, so the old state of a block is the new one patched at T. (The whole pre-event arrays, kept
-    beside the new ones, made XLA copy every species array, S slots each, on every event.)
+        new rate = X_tb            (t lives after the event; else 0)
+        old rate = X_tb w_t^old / w_t^new   (t lived before and after: "exact" rows)
+        old rate = X_tb            (t died in the event),  0 (t was free before).
 
-    Where ``do`` is False, R is left as it was (the caller discards the scalar results).
+    The rows that lived before and after with a changed zoom or a fractional multiplicity (rare:
+    fragment counts, demagnified donors) get their old rates from the full formula in a second pass
+    that runs only when such a row exists. Entries with b in T are overwritten by the new row sums
+    (R[T] = Σ_b new rate), so the b side is the new state throughout. (Before, the old rates were a
+    second rate formula and exponential per entry on a patched pre-event block: XLA fused that formula
+    into R's update as scalar code, ~40% of the update's time at 1666 live species.)
+
+    ``old`` (:class:`_Old`) holds the pre-event values of the slots T only. Where ``do`` is False, R is
+    left as it was (the caller discards the scalar results).
 
     Returns the updated state; also refreshes ``ns`` (valid slots) and, for the maintenance
     triggers, ``extras`` = (ln max m over valid slots, ln M1, ln M2) of the new state (−inf where
@@ -362,6 +377,16 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     ps_t = jnp.where(vn_t[:, None], psi_n[T], old.psi)
     wo_t, wn_t, zo_t, zn_t = old.w, w_n[T], old.z, z_n[T]
     lwo_t, lwn_t = _safe_log_w(wo_t), _safe_log_w(wn_t)
+    # effective row values: new where t lives after the event, else old
+    w_e, z_e, v_e, lw_e = (jnp.where(vn_t, wn_t, wo_t), jnp.where(vn_t, zn_t, zo_t), vn_t | vo_t,
+                           jnp.where(vn_t, lwn_t, lwo_t))
+    both = vo_t & vn_t
+    exact = (zo_t == zn_t) & (wo_t >= 1.0) & (wn_t >= 1.0)
+    # per-row factors of X: f_new (row sums, all rows), f (R's delta: new minus old rate, rows in Tmask)
+    f_new = jnp.where(vn_t, 1.0, 0.0)
+    f_old = jnp.where(both, jnp.where(exact, wo_t / jnp.where(both, wn_t, 1.0), 0.0), jnp.where(vo_t, 1.0, 0.0))
+    f = (jnp.where(Tmask, f_new - f_old, 0.0))[:, None]
+    f_new = f_new[:, None]
     kern, l2f = p["kernel"], p["log2_feps"]
     s = st.s
     ninf = jnp.array(-jnp.inf)
@@ -374,25 +399,19 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
         R, rowsum, lmax, ns, lmx, l1, l2 = c
         vn_b, lmn_b, psn_b = _sl(valid_n, start, B), _sl(logm_n, start, B), _sl(psi_n, start, B)
         wn_b, zn_b = _sl(w_n, start, B), _sl(z_n, start, B)
-        vo_b = _patch(vn_b, idx, T, old.valid)
-        lm_b = jnp.where(vn_b, lmn_b, _patch(lmn_b, idx, T, old.logm))
-        ps_b = jnp.where(vn_b[:, None], psn_b, _patch(psn_b, idx, T, old.psi))
-        wo_b, zo_b = _patch(wn_b, idx, T, old.w), _patch(zn_b, idx, T, old.z)
         lwn_b = _safe_log_w(wn_b)
-        logK = log_kernel_tile(kern, lm_t, ps_t, lm_b, ps_b)
-        Lo = log_rate_tile(logK, T, lm_t, wo_t, zo_t, vo_t, idx, lm_b, wo_b, zo_b, vo_b & fresh, l2f, cfg.rounding,
-                           lw_a=lwo_t)
-        Ln = log_rate_tile(logK, T, lm_t, wn_t, zn_t, vn_t, idx, lm_b, wn_b, zn_b, vn_b & fresh, l2f, cfg.rounding,
-                           lw_a=lwn_t, lw_b=lwn_b)
-        eo = jnp.where(Tmask[:, None], jnp.exp(Lo - s), 0.0)
-        en_all = jnp.exp(Ln - s)
-        en = jnp.where(Tmask[:, None], en_all, 0.0)
+        logK = log_kernel_tile(kern, lm_t, ps_t, lmn_b, psn_b)
+        L = log_rate_tile(logK, T, lm_t, w_e, z_e, v_e, idx, lmn_b, wn_b, zn_b, vn_b & fresh, l2f, cfg.rounding,
+                          lw_a=lw_e, lw_b=lwn_b)
+        # products with per-row factors, no select on a value computed from ln K (it keeps XLA-CPU from
+        # vectorising, see rates.log_rate_tile); X = inf (ln Λ' - s > 709) makes R NaN, and sets "over" below
+        X = jnp.exp(L - s)
         # R is read here only by its own update (same slots): any other reader of R in this loop (the
         # checks below used to be here) made XLA copy R, all S slots, twice per block
-        delta = jnp.where(fresh & do, jnp.sum(en - eo, axis=0), 0.0)
+        delta = jnp.where(fresh & do, jnp.sum(X * f, axis=0), 0.0)
         R = jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) + delta, start, axis=0)
-        rowsum = rowsum + jnp.sum(en_all, axis=1)
-        lmax = jnp.maximum(lmax, jnp.max(Ln))
+        rowsum = rowsum + jnp.sum(X * f_new, axis=1)
+        lmax = jnp.maximum(lmax, jnp.max(L))
         live = vn_b & fresh
         ns = ns + jnp.sum(live).astype(jnp.int32)
         if need_lmx:
@@ -403,7 +422,24 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
             l2 = jnp.logaddexp(l2, jax.nn.logsumexp(jnp.where(live, lg + 2.0 * lmn_b, -jnp.inf)))
         return R, rowsum, lmax, ns, lmx, l1, l2
 
-    init = (st.R, jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0, jnp.int32), ninf, ninf, ninf)
+    # rows that lived before and after but are not "exact": their old rates from the full formula (pre-event
+    # row values; the b side is the new state, as above), subtracted in a pass that runs only if such a row exists
+    gen = Tmask & both & ~exact
+    s_g = jnp.where(gen, s, jnp.inf)[:, None]
+
+    def body_old(k, start, idx, fresh, R):
+        vn_b, lmn_b, psn_b = _sl(valid_n, start, B), _sl(logm_n, start, B), _sl(psi_n, start, B)
+        wn_b, zn_b = _sl(w_n, start, B), _sl(z_n, start, B)
+        logK = log_kernel_tile(kern, lm_t, ps_t, lmn_b, psn_b)
+        Lo = log_rate_tile(logK, T, lm_t, wo_t, zo_t, vo_t, idx, lmn_b, wn_b, zn_b, vn_b & fresh, l2f, cfg.rounding,
+                           lw_a=lwo_t)
+        delta = jnp.where(fresh, jnp.sum(jnp.exp(Lo - s_g), axis=0), 0.0)
+        return jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) - delta, start, axis=0)
+
+    # (before the main pass: the later writes of the species arrays, in the duplication, then depend on every
+    # pass that reads them; this pass after the main one made XLA copy w, S slots, twice per event)
+    R = _fold(cfg, jnp.where(do & jnp.any(gen), st.hi, 0), body_old, st.R)
+    init = (R, jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0, jnp.int32), ninf, ninf, ninf)
     R, rowsum, lmax, ns, lmx, l1, l2 = _fold(cfg, st.hi, body, init)
     R = R.at[jnp.where(do, T, cfg.capacity)].set(rowsum, mode="drop")
 
