@@ -888,18 +888,61 @@ def _tiles(cfg, p, st, row_fn):
     return _fold(cfg, st.hi, row_body, jnp.full((S,), -jnp.inf))
 
 
+def _tiles_sym(cfg, st, tile_fn):
+    """Blocked pass over the pairs of the active prefix for a *symmetric* matrix: ``tile_fn(rows, cols) -> (B, B)``
+    ln-entries (−inf outside); returns the (S,) ln row sums (−inf outside the prefix).
+
+    Only the column blocks kc >= kr of row block kr are evaluated: a diagonal tile adds its row sums to its
+    rows, an off-diagonal tile its row sums to its rows and its column sums to its columns (entry (a, b) is
+    entry (b, a)). nb (nb + 1) / 2 tiles instead of nb^2. Blocks as in :func:`_fold` (the last start clamped to
+    S - B, ``fresh`` in the validity masks): a slot outside its block proper adds −inf, which leaves a sum as
+    it is.
+    """
+    B, S = _B(cfg), cfg.capacity
+    lw = _safe_log_w(st.w)
+    n = jnp.asarray(st.hi, jnp.int32)
+    nb = (n + (B - 1)) // B
+
+    def blk(k):
+        start = jnp.minimum(k * B, S - B)
+        idx = start + jnp.arange(B, dtype=jnp.int32)
+        fresh = (idx >= k * B) & (idx < n)
+        return start, fresh, dict(i=idx, logm=_sl(st.logm, start, B), psi=_sl(st.psi, start, B),
+                                  w=_sl(st.w, start, B), z=_sl(st.z, start, B),
+                                  valid=_sl(st.valid, start, B) & fresh, lw=_sl(lw, start, B))
+
+    def row_body(kr, out):
+        rstart, rfresh, rows = blk(kr)
+
+        def col_body(kc, c):
+            acc, out = c
+            cstart, _, cols = blk(kc)
+            L = tile_fn(rows, cols)
+            acc = jnp.logaddexp(acc, jax.nn.logsumexp(L, axis=1))
+            colsum = jnp.where(kc > kr, jax.nn.logsumexp(L, axis=0), -jnp.inf)
+            out = jax.lax.dynamic_update_slice_in_dim(out, jnp.logaddexp(_sl(out, cstart, B), colsum), cstart, axis=0)
+            return acc, out
+
+        acc, out = jax.lax.fori_loop(kr, nb, col_body, (jnp.full((B,), -jnp.inf), out))
+        cur = _sl(out, rstart, B)
+        return jax.lax.dynamic_update_slice_in_dim(out, jnp.where(rfresh, jnp.logaddexp(cur, acc), cur), rstart,
+                                                   axis=0)
+
+    return jax.lax.fori_loop(jnp.int32(0), nb, row_body, jnp.full((S,), -jnp.inf))
+
+
 def _refresh(cfg, p, st):
-    """Full recomputation of the scaled row sums (R, s) of Λ' over the active prefix (O(hi^2), blocked;
-    the scale keeps the largest row sum at 1, rows below exp(s - 745) underflow to 0).
+    """Full recomputation of the scaled row sums (R, s) of Λ' over the active prefix (O(hi^2), blocked, the
+    upper triangle of tiles only: Λ' is symmetric; the scale keeps the largest row sum at 1, rows below
+    exp(s - 745) underflow to 0).
 
     References: Ormel (2008) eq. (5.31); MC hazard 5 in docs/design_notes.md."""
-    def row_fn(r, c):
+    def tile_fn(r, c):
         logK = log_kernel_tile(p["kernel"], r["logm"], r["psi"], c["logm"], c["psi"])
-        L = log_rate_tile(logK, r["i"], r["logm"], r["w"], r["z"], r["valid"], c["i"], c["logm"], c["w"], c["z"],
-                          c["valid"], p["log2_feps"], cfg.rounding, lw_a=r["lw"], lw_b=c["lw"])
-        return jax.nn.logsumexp(L, axis=1)
+        return log_rate_tile(logK, r["i"], r["logm"], r["w"], r["z"], r["valid"], c["i"], c["logm"], c["w"], c["z"],
+                             c["valid"], p["log2_feps"], cfg.rounding, lw_a=r["lw"], lw_b=c["lw"])
 
-    rlog = _tiles(cfg, p, st, row_fn)
+    rlog = _tiles_sym(cfg, st, tile_fn)
     rlog = jnp.where(jnp.isnan(rlog), jnp.nan, rlog)
     s = jnp.max(jnp.where(jnp.isfinite(rlog) | jnp.isnan(rlog), rlog, -jnp.inf))
     s = jnp.where(jnp.isfinite(s), s, 0.0)
