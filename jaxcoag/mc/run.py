@@ -27,6 +27,7 @@ docs/design_notes.md.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import NamedTuple
 
@@ -224,16 +225,21 @@ def _fold(cfg, n, body, init, cheap=False):
     ``fresh`` marks the slots of block k proper (k B <= idx < n): slots of the clamped block that an
     earlier block already covered, and slots at or beyond n, are not fresh. Work is O(n), not O(S).
     """
-    B, S = _B(cfg, cheap), cfg.capacity
+    B = _B(cfg, cheap)
     nb = (jnp.asarray(n, jnp.int32) + (B - 1)) // B
 
     def f(k, c):
-        st_ = jnp.minimum(k * B, S - B)
-        idx = st_ + jnp.arange(B, dtype=jnp.int32)
-        fresh = (idx >= k * B) & (idx < n)
-        return body(k, st_, idx, fresh, c)
+        return body(k, *_block_at(cfg, k, n, cheap), c)
 
     return jax.lax.fori_loop(jnp.int32(0), nb, f, init)
+
+
+def _block_at(cfg, k, n, cheap=False):
+    """(start, idx, fresh) of block k of [0, n) (see :func:`_fold`)."""
+    B, S = _B(cfg, cheap), cfg.capacity
+    start = jnp.minimum(k * B, S - B)
+    idx = start + jnp.arange(B, dtype=jnp.int32)
+    return start, idx, (idx >= k * B) & (idx < n)
 
 
 def _pick(u, weights):
@@ -245,16 +251,12 @@ def _pick(u, weights):
 def _pick_blocked(cfg, n, wfn, u_blk, u_in):
     """Sample a slot in [0, n) with probability ∝ ``wfn(start, idx)`` (non-negative block weights):
     block sums, one block by ``u_blk``, the slot within it by ``u_in``. Returns (slot, total weight)."""
-    B, S = _B(cfg, True), cfg.capacity
-
     def body(k, start, idx, fresh, c):
         return c.at[k].set(jnp.sum(jnp.where(fresh, wfn(start, idx), 0.0)))
 
     bs = _fold(cfg, n, body, jnp.zeros((_nblocks(cfg, True),), jnp.float64), cheap=True)
     kb = _pick(u_blk, bs).astype(jnp.int32)
-    start = jnp.minimum(kb * B, S - B)
-    idx = start + jnp.arange(B, dtype=jnp.int32)
-    fresh = (idx >= kb * B) & (idx < n)
+    start, idx, fresh = _block_at(cfg, kb, n, cheap=True)
     j = _pick(u_in, jnp.where(fresh, wfn(start, idx), 0.0))
     return (start + j).astype(jnp.int32), jnp.sum(bs)
 
@@ -290,7 +292,7 @@ def _pick_partner(cfg, p, st, a, u_blk, u_in):
     log-sum-exp cost a max and a sum pass per block). R_a is the row's sum up to the round-off of the
     incremental updates, far from the e^709 that would overflow a weight.
     """
-    B, S = _B(cfg), cfg.capacity
+    B = _B(cfg)
     a1 = jnp.reshape(a, (1,)).astype(jnp.int32)
     la, pa, wa, za, va = _props(_arrays(st), a1)
     Ra = st.R[a]
@@ -308,9 +310,7 @@ def _pick_partner(cfg, p, st, a, u_blk, u_in):
 
     bs = _fold(cfg, st.hi, body, jnp.zeros((_nblocks(cfg),), jnp.float64))
     kb = _pick(u_blk, bs).astype(jnp.int32)
-    start = jnp.minimum(kb * B, S - B)
-    idx = start + jnp.arange(B, dtype=jnp.int32)
-    fresh = (idx >= kb * B) & (idx < st.hi)
+    start, idx, fresh = _block_at(cfg, kb, st.hi)
     j = _pick(u_in, wts(start, idx, fresh))
     return (start + j).astype(jnp.int32)
 
@@ -864,16 +864,20 @@ def _event(cfg, p, st):
 
 # ----------------------------------------------------------------------------- maintenance
 
+def _species_block(st, lw, B, start, idx, fresh):
+    """The species arrays of one block (slots idx = start + arange(B)) as a dict for the tile functions; valid
+    includes ``fresh``."""
+    return dict(i=idx, logm=_sl(st.logm, start, B), psi=_sl(st.psi, start, B), w=_sl(st.w, start, B),
+                z=_sl(st.z, start, B), valid=_sl(st.valid, start, B) & fresh, lw=_sl(lw, start, B))
+
+
 def _tiles(cfg, p, st, row_fn):
     """Blocked O(hi^2) pass over the pairs of the active prefix: for every row block, fold
     ``row_fn(rows, cols) -> (B,) ln-sum`` over the column blocks with logaddexp; returns (S,) ln-sums
     (−inf for slots outside the prefix)."""
     B, S = _B(cfg), cfg.capacity
     lw = _safe_log_w(st.w)
-
-    def blk(start, idx, fresh):
-        return dict(i=idx, logm=_sl(st.logm, start, B), psi=_sl(st.psi, start, B), w=_sl(st.w, start, B),
-                    z=_sl(st.z, start, B), valid=_sl(st.valid, start, B) & fresh, lw=_sl(lw, start, B))
+    blk = functools.partial(_species_block, st, lw, B)
 
     def row_body(kr, rstart, ridx, rfresh, out):
         rows = blk(rstart, ridx, rfresh)
@@ -904,12 +908,8 @@ def _tiles_sym(cfg, st, tile_fn):
     nb = (n + (B - 1)) // B
 
     def blk(k):
-        start = jnp.minimum(k * B, S - B)
-        idx = start + jnp.arange(B, dtype=jnp.int32)
-        fresh = (idx >= k * B) & (idx < n)
-        return start, fresh, dict(i=idx, logm=_sl(st.logm, start, B), psi=_sl(st.psi, start, B),
-                                  w=_sl(st.w, start, B), z=_sl(st.z, start, B),
-                                  valid=_sl(st.valid, start, B) & fresh, lw=_sl(lw, start, B))
+        start, idx, fresh = _block_at(cfg, k, n)
+        return start, fresh, _species_block(st, lw, B, start, idx, fresh)
 
     def row_body(kr, out):
         rstart, rfresh, rows = blk(kr)
