@@ -350,8 +350,9 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
 
     The rows that lived before and after with a changed zoom or a fractional multiplicity (fragment counts,
     demagnified donors, species merged into fractional multiplicities: ~10% of the updates of a long constant-Ns
-    run) get their old rates from the full formula in a second pass that runs only when such a row exists. Entries with b in T are overwritten by the new row sums
-    (R[T] = Σ_b new rate), so the b side is the new state throughout. (Before, the old rates were a
+    run) get their old rates from the full formula in a second pass that runs only when such a row exists.
+    Entries with b in T are overwritten by the new row sums (R[T] = Σ_b new rate), so the b side is the new
+    state throughout. (Before, the old rates were a
     second rate formula and exponential per entry on a patched pre-event block: XLA fused that formula
     into R's update as scalar code, ~40% of the update's time at 1666 live species.)
 
@@ -395,12 +396,14 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
     need_lmx = cfg.grouping == "distribution"
 
-    def body(k, start, idx, fresh, c):
-        R, rowsum, lmax, ns, lmx, l1, l2 = c
+    def block(start):   # the new state of one block, ln w and the kernel tile against the touched rows
         vn_b, lmn_b, psn_b = _sl(valid_n, start, B), _sl(logm_n, start, B), _sl(psi_n, start, B)
         wn_b, zn_b = _sl(w_n, start, B), _sl(z_n, start, B)
-        lwn_b = _safe_log_w(wn_b)
-        logK = log_kernel_tile(kern, lm_t, ps_t, lmn_b, psn_b)
+        return vn_b, lmn_b, wn_b, zn_b, _safe_log_w(wn_b), log_kernel_tile(kern, lm_t, ps_t, lmn_b, psn_b)
+
+    def body(k, start, idx, fresh, c):
+        R, rowsum, lmax, ns, lmx, l1, l2 = c
+        vn_b, lmn_b, wn_b, zn_b, lwn_b, logK = block(start)
         L = log_rate_tile(logK, T, lm_t, w_e, z_e, v_e, idx, lmn_b, wn_b, zn_b, vn_b & fresh, l2f, cfg.rounding,
                           lw_a=lw_e, lw_b=lwn_b)
         # products with per-row factors, no select on a value computed from ln K (it keeps XLA-CPU from
@@ -428,11 +431,9 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     s_g = jnp.where(gen, s, jnp.inf)[:, None]
 
     def body_old(k, start, idx, fresh, R):
-        vn_b, lmn_b, psn_b = _sl(valid_n, start, B), _sl(logm_n, start, B), _sl(psi_n, start, B)
-        wn_b, zn_b = _sl(w_n, start, B), _sl(z_n, start, B)
-        logK = log_kernel_tile(kern, lm_t, ps_t, lmn_b, psn_b)
+        vn_b, lmn_b, wn_b, zn_b, lwn_b, logK = block(start)
         Lo = log_rate_tile(logK, T, lm_t, wo_t, zo_t, vo_t, idx, lmn_b, wn_b, zn_b, vn_b & fresh, l2f, cfg.rounding,
-                           lw_a=lwo_t)
+                           lw_a=lwo_t, lw_b=lwn_b)
         delta = jnp.where(fresh, jnp.sum(jnp.exp(Lo - s_g), axis=0), 0.0)
         return jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) - delta, start, axis=0)
 
