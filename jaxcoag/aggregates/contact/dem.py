@@ -165,10 +165,6 @@ class DEMState(eqx.Module):
         nbr: (N, K_nb) int32 Verlet neighbours j > i of i (N = empty).
         x_ref: (N, 3) positions at the last neighbour-list build [cm].
         U: (4,) potential energies (U_n, U_s, U_r, U_t) of all contacts at ``x`` [erg].
-        Uc: (C, 4) energies (U_n, U_s, U_r, U_t) of each contact at ``x`` [erg] (booked as dissipated when
-            the contact breaks in the next step).
-        Fc, Mc1, Mc2: (C, 3) force on monomer ci [dyn] and torques on ci and cj [dyn cm] of each contact at ``x``
-            (for the work of a contact that breaks in the next step).
         E_dis: (4,) dissipated energies (normal, sliding, rolling, twisting) since the start [erg].
         Fe: (N, 3) event-time correction at ``x`` [dyn]: the correction impulses due at this configuration over dt
             (module docstring, "Event times"), applied with ``F`` in the two half kicks around ``x``.
@@ -203,10 +199,6 @@ class DEMState(eqx.Module):
     nbr: jax.Array
     x_ref: jax.Array
     U: jax.Array
-    Uc: jax.Array
-    Fc: jax.Array
-    Mc1: jax.Array
-    Mc2: jax.Array
     E_dis: jax.Array
     Fe: jax.Array
     Me: jax.Array
@@ -325,9 +317,8 @@ def _pair_sum(f_i, f_j, ci, cj, active, N):
 
 
 def _evaluate(x, ci, cj, active, n_i, n_j, phi, mat):
-    """Force [dyn] and torque [dyn cm] on every monomer, the four potential energies (U_n, U_s, U_r, U_t) [erg]
-    summed over the contacts, and per contact slot (zero where empty): the energies (C, 4) [erg], the force on
-    monomer ci (C, 3) [dyn] and the torques on ci and cj (C, 3) [dyn cm]."""
+    """Force [dyn] and torque [dyn cm] on every monomer and the four potential energies (U_n, U_s, U_r, U_t) [erg]
+    summed over the contacts (the per-slot values: :func:`_slot_forces`)."""
     xi, xj = _safe_pairs(x, ci, cj, active, mat.r1)
     return _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, x.shape[0])
 
@@ -344,7 +335,24 @@ def _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N):
     M2 = jnp.where(a, cf.M2, 0.0)
     Uc = jnp.where(a, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1), 0.0)
     FM = _pair_sum(jnp.concatenate([F1, M1], axis=-1), jnp.concatenate([-F1, M2], axis=-1), ci, cj, active, N)
-    return FM[:, :3], FM[:, 3:], jnp.sum(Uc, axis=0), Uc, F1, M1, M2
+    return FM[:, :3], FM[:, 3:], jnp.sum(Uc, axis=0)
+
+
+def _slot_forces(xi, xj, mask, n_i, n_j, phi, mat):
+    """Per slot, zero where ``mask`` is False: the energies (U_n, U_s, U_r, U_t) (C, 4) [erg], the force on monomer ci
+    (C, 3) [dyn] and the torques on ci and cj (C, 3) [dyn cm] of the contacts (``interactions.contact_forces``) at
+    the pair-end positions ``xi``, ``xj`` (rows of the slots' monomers; any finite values where masked).
+
+    The step needs them only for the slots that break or form in it (the energy ledger and the event-time
+    correction), so they are evaluated there, inside the branches taken on such steps, from the same inputs as the
+    force pass that summed them: the state does not carry them (they were four (C, k) fields written every step,
+    and XLA copied each of them twice per step to keep the old values alive next to the new ones)."""
+    xi, xj = _pair_ends(xi, xj, mask, mat.r1)
+    ni, nj, ph = _safe_pointers(n_i, n_j, phi, mask)
+    cf = contact_forces(xi, xj, ni, nj, ph, mat)
+    a = mask[..., None]
+    Uc = jnp.where(a, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1), 0.0)
+    return Uc, jnp.where(a, cf.F1, 0.0), jnp.where(a, cf.M1, 0.0), jnp.where(a, cf.M2, 0.0)
 
 
 # ------------------------------------------------------------------------------------------------- neighbours
@@ -626,12 +634,12 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
     active = jnp.zeros((C,), bool)
     z3 = jnp.zeros((C, 3))
     ci, cj, active, n_i, n_j, phi, _, ovf_c = _create(x, ci, ci, active, z3, z3, jnp.zeros((C,)), nbr, mat)
-    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate(x, ci, cj, active, n_i, n_j, phi, mat)
+    F, M, U = _evaluate(x, ci, cj, active, n_i, n_j, phi, mat)
     flags = jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
     i64 = lambda n: jnp.asarray(n, jnp.int64)  # noqa: E731
     none = jnp.full((2 * C,), N, jnp.int32)
     return DEMState(x=x, v=v, w=w, F=F, M=M, ci=ci, cj=cj, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
-                    x_ref=x, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=jnp.zeros(4), Fe=jnp.zeros((N, 3)),
+                    x_ref=x, U=U, E_dis=jnp.zeros(4), Fe=jnp.zeros((N, 3)),
                     Me=jnp.zeros((N, 3)), ev_f=jnp.zeros((2 * C,)), ev_i=none, ev_j=none, ev_t=jnp.zeros((C, 6)),
                     axes=jnp.ones((dim,), bool),
                     step=i64(0), t0=t0,
@@ -642,7 +650,7 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
 # ------------------------------------------------------------------------------------------------- step
 #: per-slot fields of :class:`DEMState` with a leading axis of C slots; ``ev_f``, ``ev_i``, ``ev_j`` have 2C (the
 #: breakings' half, then the creations')
-_SLOT_FIELDS = ("ci", "cj", "active", "n_i", "n_j", "phi", "Uc", "Fc", "Mc1", "Mc2", "ev_t")
+_SLOT_FIELDS = ("ci", "cj", "active", "n_i", "n_j", "phi", "ev_t")
 _SLOT_FIELDS_2C = ("ev_f", "ev_i", "ev_j")
 #: slots kept free above the highest used slot when a prefix is chosen (new contacts of the step)
 _PREFIX_SLACK = 8
@@ -758,11 +766,20 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         broken = active & (2.0 * r1 - dist < -mat.delta_c)
         active = active & ~broken
         ci, cj = jnp.where(active, ci, N), jnp.where(active, cj, N)
-        # energy ledger of a breaking (module docstring): the stored energies of the contact leave U; the
+        # energy ledger of a breaking (module docstring): the energies of the contact at st.x leave U; the
         # work of its last half kick, done in this step's first half kick, is part of the kinetic energy
-        wb = jnp.where(broken, _half_work(st.Fc, st.Mc1, st.Mc2, gi, gj), 0.0)
-        E_dis = E_dis + jnp.sum(jnp.where(broken[..., None], st.Uc, 0.0), axis=0) - jnp.zeros(4).at[0].set(
-            jnp.sum(wb))
+        n_broken = jnp.sum(broken)
+
+        def broken_forces():
+            # the broken contacts' energies, force and torques at st.x, as the previous step's force pass had them
+            return _slot_forces(_gather(st.x, ci_old), _gather(st.x, cj_old), broken, st.n_i, st.n_j, st.phi, mat)
+
+        def book_breaking(_):
+            Uc_b, Fc_b, Mc1_b, Mc2_b = broken_forces()
+            wb = _half_work(Fc_b, Mc1_b, Mc2_b, gi, gj)
+            return jnp.sum(Uc_b, axis=0).at[0].add(-jnp.sum(wb))
+
+        E_dis = E_dis + _cond_members(n_broken > 0, book_breaking, lambda _: jnp.zeros(4), None)
         cutoff = (2.0 + skin) * r1
         disp2 = jnp.max(_dot(x - st.x_ref, x - st.x_ref))
         rebuild = disp2 > (0.5 * skin * r1) ** 2
@@ -779,23 +796,23 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         # creation is rare: the slot assignment runs only when some neighbour pair has delta >= 0 and no contact
         # (a touching pair, delta >= 0, is in the Verlet list; it is new unless it is an active contact)
         dxn = x[:, None, :] - _gather(x, nbr)
-        n_touch = jnp.sum((nbr < N) & (_dot(dxn, dxn) <= (2.0 * r1) ** 2))
-        n_touch_old = jnp.sum(active & (2.0 * r1 - dist >= 0))
+        n_touch = jnp.sum(jnp.sum((nbr < N) & (_dot(dxn, dxn) <= (2.0 * r1) ** 2), axis=1, dtype=jnp.int32))
+        n_touch_old = jnp.sum(active & (2.0 * r1 - dist >= 0), dtype=jnp.int32)
 
         def create(args):
-            i_, j_, a, ni_, nj_, ph, gi_, gj_ = args
-            i_, j_, a, ni_, nj_, ph, nw, ovf = _create(x, i_, j_, a, ni_, nj_, ph, nbr, mat)
-            gi_ = jnp.where(nw[:, None], _gather(rows, i_), gi_)
-            gj_ = jnp.where(nw[:, None], _gather(rows, j_), gj_)
-            return i_, j_, a, ni_, nj_, ph, gi_, gj_, nw, ovf
+            return _create(x, *args, nbr, mat)
 
         def no_create(args):
             return (*args, jnp.zeros_like(args[2]), jnp.zeros((), bool))
 
         maybe_new = n_touch > n_touch_old
-        ci, cj, active, n_i, n_j, phi, gi, gj, new, ovf_c = _cond_members(
-            maybe_new, create, no_create, (ci, cj, active, n_i, n_j, phi, gi, gj))
-        xi, xj = _pair_ends(gi[:, :3], gj[:, :3], active, r1)
+        ci, cj, active, n_i, n_j, phi, new, ovf_c = _cond_members(
+            maybe_new, create, no_create, (ci, cj, active, n_i, n_j, phi))
+        # pair ends of the new contacts (the rows gi, gj stay those of the slots before the creation: the branch
+        # above does not pass them through, which made XLA copy both (C, 11) arrays on every step)
+        gi_x = jnp.where(new[:, None], _gather(x, ci), gi[:, :3])
+        gj_x = jnp.where(new[:, None], _gather(x, cj), gj[:, :3])
+        xi, xj = _pair_ends(gi_x, gj_x, active, r1)
         flags = flags | jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
         n_ev = (jnp.sum(broken) + jnp.sum(new)).astype(jnp.int64)
         if cfg.events:
@@ -803,10 +820,12 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
             # (1/2) Fe.dx in this step's second half kick
             def correct(_):
                 return _event_impulses(st.x, x, ci_old, cj_old, broken, ci, cj, new, st.ev_f, st.ev_i, st.ev_j,
-                                       st.ev_t, st.Fc, st.Mc1, mat)
+                                       st.ev_t, *broken_forces()[1:3], mat)
 
             def no_correct(_):
-                return Fe, Me, ev_f, ev_i, ev_j, ev_t
+                # made here, not passed in: a branch that returns its operands makes XLA copy them
+                return (jnp.zeros_like(st.Fe), jnp.zeros_like(st.Me), jnp.zeros_like(st.ev_f),
+                        jnp.full_like(st.ev_i, N), jnp.full_like(st.ev_j, N), jnp.zeros_like(st.ev_t))
 
             pending = (n_ev > 0) | jnp.any(st.ev_i < N)
             Fe, Me, ev_f, ev_i, ev_j, ev_t = _cond_members(pending, correct, no_correct, None)
@@ -814,17 +833,20 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     if cfg.inelastic:
         n_i, n_j, phi, dE = _clip(xi, xj, active, n_i, n_j, phi, mat)
         E_dis = E_dis + jnp.concatenate([jnp.zeros(1), dE])
-    F, M, U, Uc, Fc, Mc1, Mc2 = _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N)
+    F, M, U = _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N)
     if not cfg.freeze:
         # creation: U_n jumps from 0 to U_n(delta), and the second half kick does the new contact's work
-        wc = _half_work(Fc, Mc1, Mc2, gi, gj)
-        E_dis = E_dis.at[0].add(-jnp.sum(jnp.where(new, Uc[..., 0] + wc, 0.0)))
+        def book_creation(_):
+            Uc_n, Fc_n, Mc1_n, Mc2_n = _slot_forces(xi, xj, new, n_i, n_j, phi, mat)
+            return -jnp.sum(Uc_n[..., 0] + _half_work(Fc_n, Mc1_n, Mc2_n, _gather(rows, ci), _gather(rows, cj)))
+
+        E_dis = E_dis.at[0].add(_cond_members(jnp.any(new), book_creation, lambda _: jnp.zeros(()), None))
     v = v + (0.5 * dt / m1) * (F + Fe)
     w = w + (0.5 * dt / I1) * (M + Me)
     stp = st.step + 1
     event = n_ev > 0
     return DEMState(x=x, v=v, w=w, F=F, M=M, ci=ci, cj=cj, active=active, n_i=n_i, n_j=n_j, phi=phi, nbr=nbr,
-                    x_ref=x_ref, U=U, Uc=Uc, Fc=Fc, Mc1=Mc1, Mc2=Mc2, E_dis=E_dis, Fe=Fe, Me=Me, ev_f=ev_f,
+                    x_ref=x_ref, U=U, E_dis=E_dis, Fe=Fe, Me=Me, ev_f=ev_f,
                     ev_i=ev_i, ev_j=ev_j, ev_t=ev_t, axes=st.axes, step=stp, t0=st.t0,
                     flags=flags, n_events=st.n_events + n_ev,
                     first_event=jnp.where(event & (st.first_event < 0), stp, st.first_event),
