@@ -265,10 +265,11 @@ def _two_chains(n, gap, v_rel):
 
 @pytest.mark.parametrize("system", ["chains", pytest.param("bcca3d", marks=pytest.mark.slow)])
 def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
-    """The step over the prefix of the contact list that holds the used slots (dem._step) against the step over
-    the whole list (prefixes switched off): the same contacts, positions, velocities and energy ledger to
+    """Blocks of steps over the prefix of the contact list that holds the used slots (dem._steps) against steps
+    over the whole list (prefixes switched off): the same contacts, positions, velocities and energy ledger to
     round-off. 'chains': 40 contacts form in one step, more than the 1.25 N prefix has free (78 of 104 slots
-    used), so the step spills to the whole list; 'bcca3d': a 3-D 32 + 32 BCCA collision at 10 v0 with
+    used), so the block spills and is taken again on the whole list (through ``integrate``'s static chunks and
+    ``advance_to``'s traced blocks); 'bcca3d': a 3-D 32 + 32 BCCA collision at 10 v0 with
     creations and breakings through the prefixes."""
     monkeypatch.setattr(dem, "_PREFIX_MIN_SLOTS", 64)  # small lists get the prefixes too
     if system == "chains":
@@ -284,11 +285,19 @@ def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
         st0 = dem.init_state(x, v, np.zeros_like(x), MAT, dim=3)
         n_steps = 8000
         assert dem._prefix_sizes(64, st0.ci.shape[0]) == (80, 104, 128, 192)
-    runs = {}
+    runs, adv = {}, {}
     for label, min_slots in (("prefix", 64), ("whole", 10**9)):
         monkeypatch.setattr(dem, "_PREFIX_MIN_SLOTS", min_slots)
         jax.clear_caches()
         runs[label], _ = dem.integrate(st0, MAT, n_steps, dt=DT, chunk=n_steps // 10)
+        if system == "chains":  # the forward loop: blocks of a traced number of steps (_n_steps_loop)
+            adv[label], _ = dem.advance_to(st0, MAT, jnp.array([7, n_steps]), dt=DT)
+    if system == "chains":
+        for k in ("ci", "active", "x", "v", "E_dis"):
+            np.testing.assert_allclose(np.asarray(getattr(adv["prefix"], k)), np.asarray(getattr(adv["whole"], k)),
+                                       rtol=1e-12, atol=0, err_msg=k)
+            np.testing.assert_allclose(np.asarray(getattr(adv["prefix"], k)), np.asarray(getattr(runs["whole"], k)),
+                                       rtol=1e-12, atol=0, err_msg=k)
     p, w = runs["prefix"], runs["whole"]
     assert int(p.flags) == 0 and int(w.flags) == 0
     n_new = int(jnp.sum(w.active)) - int(jnp.sum(st0.active))
