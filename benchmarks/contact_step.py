@@ -9,8 +9,9 @@ a subprocess of the same invocation and reports this/baseline ratios. Both use t
 layouts of different revisions are compared on identical work (no records, no stop checks); the public API's
 throughput against LAMMPS is ``contact_throughput.py``.
 
-Run: ``python benchmarks/contact_step.py [--baseline DIR] [--dims 2,3] [--steps-2d 1000] [--steps-3d 200]
-[--repeats 2] [--out PATH]``. Writes ``benchmarks/results/contact_step.json``.
+Run: ``python benchmarks/contact_step.py [--baseline DIR] [--rounds 1] [--dims 2,3] [--steps-2d 1000]
+[--steps-3d 200] [--repeats 2] [--out PATH]``; ``--rounds R`` alternates the two checkouts R times in fresh
+processes and keeps each one's best (the load of a shared machine comes in bursts). Writes ``benchmarks/results/contact_step.json``.
 References: Wada, Tanaka, Suyama, Kimura & Yamamoto (2007) ApJ 661, 320, §4 (set-up, dt = 0.014 t_c).
 """
 
@@ -84,6 +85,8 @@ def main(argv=None):
     ap.add_argument("--steps-2d", type=int, default=1000)
     ap.add_argument("--steps-3d", type=int, default=200)
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=1, help="with --baseline: alternate the two checkouts this many "
+                    "times (fresh processes) and keep each one's best (bursts of load on a shared machine)")
     ap.add_argument("--out", default=None)
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--child-steps", type=int, default=0, help=argparse.SUPPRESS)
@@ -112,13 +115,28 @@ def main(argv=None):
             row = dict(system=f"{dim}d {N_HALF[dim]}+{N_HALF[dim]}", ours=_time_steps(npz, steps, a.repeats))
             print(f"  this checkout: {row['ours']['us_per_step']:.1f} us/step", flush=True)
             if a.baseline:
-                out = subprocess.run([sys.executable, __file__, "--child", npz, "--child-steps", str(steps),
-                                      "--repeats", str(a.repeats), "--child-root", a.baseline],
-                                     capture_output=True, text=True, check=True)
-                row["baseline"] = json.loads(out.stdout.strip().splitlines()[-1])
+                def child(root):
+                    cmd = [sys.executable, __file__, "--child", npz, "--child-steps", str(steps), "--repeats",
+                           str(a.repeats)] + (["--child-root", root] if root else [])
+                    out = subprocess.run(cmd, capture_output=True, text=True, check=True)
+                    return json.loads(out.stdout.strip().splitlines()[-1])
+
+                rounds = {"ours": [row["ours"]["us_per_step"]], "baseline": []}
+                for r in range(a.rounds):
+                    if r:  # later rounds: this checkout again, in a fresh process like the baseline's
+                        o = child(None)
+                        rounds["ours"].append(o["us_per_step"])
+                        if o["us_per_step"] < row["ours"]["us_per_step"]:
+                            row["ours"] = o
+                    b = child(a.baseline)
+                    rounds["baseline"].append(b["us_per_step"])
+                    if "baseline" not in row or b["us_per_step"] < row["baseline"]["us_per_step"]:
+                        row["baseline"] = b
+                row["rounds_us_per_step"] = rounds
                 row["speedup"] = row["baseline"]["us_per_step"] / row["ours"]["us_per_step"]
                 print(f"  baseline ({row['baseline']['jaxcoag']}): {row['baseline']['us_per_step']:.1f} us/step; "
-                      f"speed-up {row['speedup']:.2f}x", flush=True)
+                      f"this checkout (best of {a.rounds} rounds) {row['ours']['us_per_step']:.1f} us/step; "
+                      f"speed-up {row['speedup']:.2f}x (rounds: {rounds})", flush=True)
             rows.append(row)
     res = dict(description="wall time per contact-DEM step (jitted dem._n_steps_loop, ice BCCAs head-on at 5.7 v_0, "
                            "dt = 0.014 t_c), this checkout vs --baseline in the same invocation",
