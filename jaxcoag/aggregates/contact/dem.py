@@ -17,8 +17,9 @@ State (:class:`DEMState`, fixed capacity, every field an array so that it checkp
   aggregate has about one contact per monomer, so a list of 2 (2-D) or 3 (3-D) slots per monomer is 3-4x
   shorter than a table of the largest coordination per monomer (6 / 12 slots, the layout before), and that
   length is what a step costs (docs/design_notes.md, "DEM contact layout"). Since new contacts take the lowest
-  free slots, the used slots stay a prefix of the list: a step processes the smallest prefix (1.25 N, 1.625 N,
-  2 N or C) that holds them (:func:`_step`), so a tree-like aggregate costs ~1.25 N slots per step whatever the
+  free slots, the used slots stay a prefix of the list: each block of steps (256 in the forward loops, a chunk
+  of :func:`integrate`) processes the smallest prefix (1.25 N, 1.625 N, 2 N or C) that holds them with room for
+  the block's new contacts (:func:`_steps`), so a tree-like aggregate costs ~1.25 N slots per step whatever the
   capacity;
 * a Verlet neighbour list ``nbr`` (N, K_nb) of partners j > i within 2 r1 + skin (skin = 0.1 r1 by default),
   rebuilt inside ``lax.cond`` when a monomer has moved more than skin/2 since the last build (under ``jax.vmap``
