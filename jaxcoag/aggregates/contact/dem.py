@@ -328,13 +328,7 @@ def _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N):
     """:func:`_evaluate` from the pair-end positions (C, 3) of :func:`_safe_pairs` (gathered once per step). Every
     slot is evaluated: gathering the occupied ones (about half the list) into a buffer and scattering back cost as
     much as it saved (3-D 1024 + 1024, stop 29)."""
-    ni, nj, ph = _safe_pointers(n_i, n_j, phi, active)
-    cf = contact_forces(xi, xj, ni, nj, ph, mat)
-    a = active[..., None]
-    F1 = jnp.where(a, cf.F1, 0.0)
-    M1 = jnp.where(a, cf.M1, 0.0)
-    M2 = jnp.where(a, cf.M2, 0.0)
-    Uc = jnp.where(a, jnp.stack([cf.U_n, cf.U_s, cf.U_r, cf.U_t], axis=-1), 0.0)
+    Uc, F1, M1, M2 = _slot_forces(xi, xj, active, n_i, n_j, phi, mat)
     FM = _pair_sum(jnp.concatenate([F1, M1], axis=-1), jnp.concatenate([-F1, M2], axis=-1), ci, cj, active, N)
     return FM[:, :3], FM[:, 3:], jnp.sum(Uc, axis=0)
 
@@ -342,13 +336,14 @@ def _evaluate_pairs(xi, xj, ci, cj, active, n_i, n_j, phi, mat, N):
 def _slot_forces(xi, xj, mask, n_i, n_j, phi, mat):
     """Per slot, zero where ``mask`` is False: the energies (U_n, U_s, U_r, U_t) (C, 4) [erg], the force on monomer ci
     (C, 3) [dyn] and the torques on ci and cj (C, 3) [dyn cm] of the contacts (``interactions.contact_forces``) at
-    the pair-end positions ``xi``, ``xj`` (rows of the slots' monomers; any finite values where masked).
+    the pair-end positions ``xi``, ``xj`` of :func:`_safe_pairs` / :func:`_pair_ends` for a mask that covers
+    ``mask``.
 
-    The step needs them only for the slots that break or form in it (the energy ledger and the event-time
-    correction), so they are evaluated there, inside the branches taken on such steps, from the same inputs as the
-    force pass that summed them: the state does not carry them (they were four (C, k) fields written every step,
+    The force pass sums them over the active slots (:func:`_evaluate_pairs`); beyond that the step needs them only
+    for the slots that break or form in it (the energy ledger and the event-time correction), so they are evaluated
+    again there, inside the branches taken on such steps, from the same inputs as the force pass that summed them:
+    the state does not carry them (they were four (C, k) fields written every step,
     and XLA copied each of them twice per step to keep the old values alive next to the new ones)."""
-    xi, xj = _pair_ends(xi, xj, mask, mat.r1)
     ni, nj, ph = _safe_pointers(n_i, n_j, phi, mask)
     cf = contact_forces(xi, xj, ni, nj, ph, mat)
     a = mask[..., None]
@@ -655,6 +650,11 @@ _SLOT_FIELDS = ("ci", "cj", "active", "n_i", "n_j", "phi", "ev_t")
 _SLOT_FIELDS_2C = ("ev_f", "ev_i", "ev_j")
 #: steps of the forward loops (:func:`_n_steps_loop`) per choice of the prefix
 _DISPATCH_STEPS = 256
+#: prefix sizes in units of N (a tree has N - 1 contacts; a collision compacts it to ~1.5 N in 2-D)
+_PREFIX_FRACTIONS = (1.25, 1.625, 2.0)
+#: lists shorter than this are always processed whole: each prefix size is another copy of the step to compile
+#: (~3-4 s on 2 cores), more than a short list's steps save
+_PREFIX_MIN_SLOTS = 1024
 
 
 def _prefix_slack(n_mono: int) -> int:
@@ -662,11 +662,6 @@ def _prefix_slack(n_mono: int) -> int:
     of up to ``_DISPATCH_STEPS`` steps; a block whose creations need more is taken again on the whole list):
     N/32, at least 8."""
     return max(8, n_mono // 32)
-#: prefix sizes in units of N (a tree has N - 1 contacts; a collision compacts it to ~1.5 N in 2-D)
-_PREFIX_FRACTIONS = (1.25, 1.625, 2.0)
-#: lists shorter than this are always processed whole: each prefix size is another copy of the step to compile
-#: (~3-4 s on 2 cores), more than a short list's steps save
-_PREFIX_MIN_SLOTS = 1024
 
 
 def _prefix_sizes(n_mono: int, n_slots: int) -> tuple[int, ...]:
@@ -801,7 +796,7 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
 
         def broken_forces():
             # the broken contacts' energies, force and torques at st.x, as the previous step's force pass had them
-            return _slot_forces(_gather(st.x, ci_old), _gather(st.x, cj_old), broken, st.n_i, st.n_j, st.phi, mat)
+            return _slot_forces(*_safe_pairs(st.x, ci_old, cj_old, broken, r1), broken, st.n_i, st.n_j, st.phi, mat)
 
         def book_breaking(_):
             Uc_b, Fc_b, Mc1_b, Mc2_b = broken_forces()
@@ -852,9 +847,7 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
                                        st.ev_t, *broken_forces()[1:3], mat)
 
             def no_correct(_):
-                # made here, not passed in: a branch that returns its operands makes XLA copy them
-                return (jnp.zeros_like(st.Fe), jnp.zeros_like(st.Me), jnp.zeros_like(st.ev_f),
-                        jnp.full_like(st.ev_i, N), jnp.full_like(st.ev_j, N), jnp.zeros_like(st.ev_t))
+                return Fe, Me, ev_f, ev_i, ev_j, ev_t
 
             pending = (n_ev > 0) | jnp.any(st.ev_i < N)
             Fe, Me, ev_f, ev_i, ev_j, ev_t = _cond_members(pending, correct, no_correct, None)
