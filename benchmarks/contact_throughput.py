@@ -211,13 +211,19 @@ def run_collide(n_half, dim, material, v_imp, *, n_steps, full=False, seed=0):
     return out
 
 
-def run_sweep(x_list, v_list, material, *, dim, dt, n_steps, skin=SKIN):
+def run_sweep(x_list, v_list, material, *, dim, dt, n_steps, skin=SKIN, workers=None):
     """8 (or len(v_list)) collisions of identical structure at different speeds: one ``jax.vmap`` of the jitted
-    DEM integration vs a Python loop of the same jitted integration; each timed after its own compilation.
+    DEM integration, and ``jaxcoag.sweep.sweep(..., chunk=1, workers=W)`` (each member the single integration, W
+    host threads at once; default W = the core count), vs a Python loop of the same jitted integration; each timed
+    after its own compilation.
 
     Returns dict: members, steps, vmap_s, loop_s, vmap_first_s, loop_first_s, speedup (loop_s/vmap_s),
-    vmap/loop monomer-steps per s, max |x_vmap - x_loop| [cm].
+    vmap/loop monomer-steps per s, max |x_vmap - x_loop| [cm], and workers, workers_s, workers_first_s,
+    speedup_workers (loop_s/workers_s), workers_monomer_steps_per_s, max |x_workers - x_loop| [cm].
     """
+    import os
+
+    from jaxcoag.sweep import sweep as jsweep
     import jax
     import jax.numpy as jnp
     from jaxcoag.aggregates.contact import dem
@@ -254,7 +260,21 @@ def run_sweep(x_list, v_list, material, *, dim, dt, n_steps, skin=SKIN):
         ob = vmapped()
     m = len(states)
     diff = max(float(jnp.max(jnp.abs(ob.x[i] - outs[i].x))) for i in range(m))
+    workers = workers or os.cpu_count() or 1
+
+    def member(k):
+        return {"x": one(jax.tree_util.tree_map(lambda a: a[k.astype(jnp.int32)], batch)).x}
+
+    ks = np.arange(m, dtype=np.float64)
+    with C.Timer() as tw0:
+        jsweep(member, {"k": ks}, chunk=1, workers=workers)
+    with C.Timer() as tw:
+        dw = jsweep(member, {"k": ks}, chunk=1, workers=workers)
+    diff_w = max(float(np.max(np.abs(dw["x"].values[i] - np.asarray(outs[i].x)))) for i in range(m))
     return dict(members=m, n=n, steps=n_steps, loop_first_s=tl0.seconds, loop_s=tl.seconds,
+                workers=workers, workers_first_s=tw0.seconds, workers_s=tw.seconds,
+                speedup_workers=tl.seconds / tw.seconds,
+                workers_monomer_steps_per_s=throughput(m * n, n_steps, tw.seconds), max_abs_diff_x_workers=diff_w,
                 vmap_first_s=tv0.seconds, vmap_s=tv.seconds, speedup=tl.seconds / tv.seconds,
                 loop_monomer_steps_per_s=throughput(m * n, n_steps, tl.seconds),
                 vmap_monomer_steps_per_s=throughput(m * n, n_steps, tv.seconds), max_abs_diff_x=diff,
@@ -297,11 +317,17 @@ def plot(rows, sweep, path):
     ax.set_title("contact DEM throughput (same set-up, dt, steps)")
     ax = axes[1]
     if sweep:
-        ax.bar([0, 1], [sweep["loop_monomer_steps_per_s"], sweep["vmap_monomer_steps_per_s"]], color=["C2", "C0"])
-        ax.set_xticks([0, 1])
-        ax.set_xticklabels([f"loop of {sweep['members']}", f"vmap of {sweep['members']}"])
+        vals = [sweep["loop_monomer_steps_per_s"], sweep["vmap_monomer_steps_per_s"]]
+        names = [f"loop of {sweep['members']}", f"vmap of {sweep['members']}"]
+        if "workers_monomer_steps_per_s" in sweep:
+            vals.append(sweep["workers_monomer_steps_per_s"])
+            names.append(f"sweep, {sweep['workers']} workers")
+        ax.bar(range(len(vals)), vals, color=["C2", "C0", "C3"][:len(vals)])
+        ax.set_xticks(range(len(vals)))
+        ax.set_xticklabels(names, fontsize=8)
         ax.set_ylabel("monomer-steps / s")
-        ax.set_title(f"impact-speed sweep: vmap/loop = {sweep['speedup']:.2f}x")
+        ax.set_title(f"impact-speed sweep: vmap/loop = {sweep['speedup']:.2f}x"
+                     + (f", workers/loop = {sweep['speedup_workers']:.2f}x" if "speedup_workers" in sweep else ""))
     else:
         ax.axis("off")
     fig.tight_layout()
@@ -420,6 +446,8 @@ def main(argv=None):
         sweep["v_imp_v0"] = list(speeds / v0)
         print(f"  loop {sweep['loop_s']:.3g} s, vmap {sweep['vmap_s']:.3g} s: vmap/loop speed-up "
               f"{sweep['speedup']:.3g}x (max |dx| {sweep['max_abs_diff_x']:.2e} cm)", flush=True)
+        print(f"  sweep(chunk=1, workers={sweep['workers']}) {sweep['workers_s']:.3g} s: workers/loop speed-up "
+              f"{sweep['speedup_workers']:.3g}x (max |dx| {sweep['max_abs_diff_x_workers']:.2e} cm)", flush=True)
 
     out = pathlib.Path(args.out) if args.out else OUT / ("contact_throughput" + ("_quick" if args.quick else "")
                                                          + ".json")

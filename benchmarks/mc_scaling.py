@@ -44,6 +44,7 @@ from jaxcoag import kernels as K  # noqa: E402
 from jaxcoag import mc  # noqa: E402
 
 from benchmarks._common import machine_info, print_table, write_json  # noqa: E402
+from jaxcoag.sweep import sweep  # noqa: E402
 
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 
@@ -77,31 +78,55 @@ def timed(ns, tend, capacity=None, seed=1, n_out=11, const_ns=False):
                 Ns_max_over_target=float(nsp.max()) / ns, merges=int(r.n_merge))
 
 
-def ensemble(ns=100, tend=5.0, n_seeds=8):
-    """8 seeds: one vmapped call vs a loop of jitted single calls (both after compile)."""
+def ensemble(ns=100, tend=5.0, n_seeds=8, workers=None, chunk=1):
+    """8 seeds: one vmapped call, and ``jaxcoag.sweep.sweep`` over the seeds with ``workers`` host threads
+    (chunk=1: each seed one single run; default workers = the core count), vs a loop of jitted single calls (all
+    after compile; the same keys in every mode)."""
+    workers = workers or os.cpu_count() or 1
     engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=ns, f_eps=1e-3)
     t_out = jnp.array([0.0, tend])
-    one = jax.jit(lambda key: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0), t_out, key=key,
-                                             throw=False))
-    many = jax.jit(jax.vmap(lambda key: jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0), t_out,
-                                                       key=key, throw=False)))
     keys = jax.random.split(jax.random.key(3), n_seeds)
+
+    def run(key):
+        return jaxcoag.evolve(K.Sum(0.5), engine, jaxcoag.Monodisperse(1.0, 1.0), t_out, key=key, throw=False)
+
+    one = jax.jit(run)
+    many = jax.jit(jax.vmap(run))
+
+    def member(seed):
+        r = run(keys[seed.astype(jnp.int32)])
+        return {"n_events": r.n_events, "M2": r.moments(2)[-1], "result": r.status}
+
     jax.block_until_ready(one(keys[0]).m)
     jax.block_until_ready(many(keys).m)
+    seeds = np.arange(n_seeds, dtype=np.float64)
+    t0 = time.perf_counter()
+    sweep(member, {"seed": seeds}, chunk=chunk, workers=workers)
+    compile_workers = time.perf_counter() - t0
     t0 = time.perf_counter()
     ev_loop = 0
+    finals = []
     for k in keys:
         r = one(k)
         jax.block_until_ready(r.m)
         ev_loop += int(r.n_events)
+        finals.append(r)
     t_loop = time.perf_counter() - t0
+    m2_loop = [float(r.moments(2)[-1]) for r in finals]   # (outside the timed loop)
     t0 = time.perf_counter()
     rv = many(keys)
     jax.block_until_ready(rv.m)
     t_vmap = time.perf_counter() - t0
     ev_vmap = int(np.sum(np.asarray(rv.n_events)))
+    t0 = time.perf_counter()
+    dw = sweep(member, {"seed": seeds}, chunk=chunk, workers=workers)
+    t_work = time.perf_counter() - t0
+    ev_work = int(np.sum(dw["n_events"].values))
     return dict(ns=ns, t=tend, seeds=n_seeds, loop_s=t_loop, vmap_s=t_vmap, events_loop=ev_loop, events_vmap=ev_vmap,
-                throughput_ratio_vmap_over_loop=(ev_vmap / t_vmap) / (ev_loop / t_loop))
+                throughput_ratio_vmap_over_loop=(ev_vmap / t_vmap) / (ev_loop / t_loop), workers=workers,
+                workers_s=t_work, workers_first_call_s=compile_workers, events_workers=ev_work,
+                throughput_ratio_workers_over_loop=(ev_work / t_work) / (ev_loop / t_loop),
+                workers_equal_loop=bool(np.array_equal(dw["M2"].values, np.asarray(m2_loop))))
 
 
 def tables(quick, max_ns=None):

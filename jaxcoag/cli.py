@@ -125,8 +125,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override one configuration value (repeatable)")
     s.add_argument("--out", default="jaxcoag_out/sweep.nc", help="netCDF output (default jaxcoag_out/sweep.nc)")
-    s.add_argument("--chunk", type=int, default=1, help="members integrated together (default 1: one after "
-                   "the other, each with its own step sizes)")
+    s.add_argument("--chunk", type=int, default=1, help="members integrated together (default 1: each with its "
+                   "own step sizes)")
+    s.add_argument("--workers", type=int, default=None, help="members (or chunks) integrated at the same time in "
+                   "host threads (default: the number of cores with --chunk 1, else 1)")
     s.add_argument("--quick", action="store_true", help="coarse grid, few outputs")
     s.add_argument("--no-progress", action="store_true", help="no progress bar (the bar counts finished members)")
     s.add_argument("--no-figure", action="store_true", help="do not save the figure of the swept quantity "
@@ -229,7 +231,9 @@ def _cmd_sweep(args) -> int:
         params[k.strip()] = vals
     if args.chunk < 1:
         raise runner.JaxcoagInputError("--chunk must be >= 1.")
-    ds, _ = runner.sweep_config(cfg, params, chunk=args.chunk, quick=args.quick, out=args.out,
+    if args.workers is not None and args.workers < 1:
+        raise runner.JaxcoagInputError("--workers must be >= 1.")
+    ds, _ = runner.sweep_config(cfg, params, chunk=args.chunk, workers=args.workers, quick=args.quick, out=args.out,
                                 progress=not args.no_progress, figure=not args.no_figure)
     return 0 if int(ds.attrs["n_failed"]) == 0 else 1
 

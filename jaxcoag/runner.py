@@ -512,7 +512,8 @@ def _sweep_name(name):
     return dotted, dotted.split(".")[1]
 
 
-def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=None, progress=None, figure=True):
+def sweep_config(cfg, params: dict, *, chunk=1, workers=None, quick=False, verbose=True, out=None, progress=None,
+                 figure=True):
     """Sweep scalar parameters of a configuration (outer product) in one compiled program (binned engine).
 
     Arguments:
@@ -523,6 +524,8 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
             the monomer *mass* (so the grid) fixed.
         chunk: members integrated at once (``jaxcoag.sweep.sweep`` chunk; 1 = one after the
             other, each with its own adaptive steps - implicit solvers batch poorly, docs/design_notes.md).
+        workers: members (or chunks) integrated at the same time in host threads (``jaxcoag.sweep.sweep``
+            workers); None = the number of cores (``os.cpu_count()``) when ``chunk`` is 1, else 1.
         quick: shrink the config first (:func:`quick_config`); out: netCDF path to save.
         progress: tqdm bar over the members on stderr (default: as ``verbose``); the members
             then run in blocks of ``chunk`` from Python (:func:`jaxcoag.sweep.sweep`).
@@ -595,7 +598,9 @@ def sweep_config(cfg, params: dict, *, chunk=1, quick=False, verbose=True, out=N
     t0 = time.perf_counter()
     if progress is None:
         progress = verbose
-    ds = swmod.sweep(fn, sweep_params, chunk=chunk, attrs=attrs,
+    if workers is None:
+        workers = (os.cpu_count() or 1) if chunk == 1 else 1
+    ds = swmod.sweep(fn, sweep_params, chunk=chunk, attrs=attrs, workers=workers,
                      progress=f"jaxcoag sweep {cfg['run']['name']}" if progress else False)
     wall = time.perf_counter() - t0
     rho_last = ds["mass_per_bin"].isel(t=-1).values

@@ -33,6 +33,16 @@ member to its chunk. On CPU use chunks: a 32 x 32 nebula-box sweep (32 bins) ran
 points/s with all 1024 members in one batch and 470 - 1550 points/s with chunk=16 - 256 (two
 runs of ``benchmarks/sweep_throughput.py`` on a shared, loaded 2-core machine).
 
+**Host threads (one CPU).** A member's step or event loop is sequential: one member keeps one core busy.
+Where a member is real work (a fragmentation solve of the default box, a DEM collision), a vmapped batch on a
+CPU is no faster than a loop of them (it runs every member until the slowest is done, and both branches of
+each batched ``lax.cond``; measured 0.85x and 0.68x of the loop's throughput). ``workers=W`` runs blocks of ``chunk``
+members in W host threads at once (XLA releases the GIL while a block runs) with one compiled program;
+``chunk=1`` makes every member its own unbatched program, equal to a single run. Measured on 2 cores, 8
+members, against a loop of single runs: the default box's fragmentation solves 2.06x (vmap 0.85x), Monte
+Carlo seeds 2.3 - 2.4x, contact-DEM impact speeds 2.6x (benchmarks/README.md). Blocks whose program calls
+batched LAPACK routines are refused with ``workers > 1`` (they hang there; ``chunk=1`` keeps them unbatched).
+
 **Sharding (one host).** With ``mesh=`` (a ``jax.sharding.Mesh``; the member axis is split
 over all its axes) or ``devices=`` (a list of devices, one mesh axis ``"members"``) the
 flattened members are padded to a multiple of the device count, placed with
@@ -293,33 +303,100 @@ def _compiled(fn, names, chunk, mesh, ncols, edges):
     return jax.jit(fsh), meta
 
 
-def _run_blocks(fn, names, cols, chunk, progress, edges):
-    """Unsharded evaluation block by block (``chunk`` members per compiled call, the last block
-    padded by repeating its last member) with a tqdm bar over the members on stderr."""
-    from tqdm.auto import tqdm
+@functools.lru_cache(maxsize=32)
+def _member_program(fn, names, ncols, edges):
+    """Jitted program of ONE member (no batch axis: each member's linear solves stay unbatched), its outputs
+    given a leading axis of length 1 so that they concatenate like a block's. Cached like :func:`_compiled`."""
+    meta = {}
+    one = _member_fn(fn, list(names), meta, None if edges is None else np.asarray(edges, np.float64))
+
+    def single(*cs):
+        return jax.tree_util.tree_map(lambda x: x[None], one(*[c[0] for c in cs]))
+
+    return jax.jit(single), meta
+
+
+_LAPACK_BATCHED = re.compile(r"custom_call @(lapack_\w+)\(.*num_batch_dims = \"([1-9][0-9]*)\"")
+
+
+def _refuse_batched_lapack_in_threads(lowered, workers):
+    """Refuse, before anything runs, a block program that calls batched LAPACK routines when the blocks run in
+    several host threads: jaxlib fans a batched factorisation out on the host thread pool, and with several
+    concurrent executions the program hangs (measured: a (400, 120, 120) ``jnp.linalg.solve`` from two threads
+    never returned; one member's unbatched solves ran from two threads at 2.2x the loop's throughput)."""
+    found = sorted({m.group(1) for m in _LAPACK_BATCHED.finditer(lowered.as_text())})
+    if found:
+        raise JaxcoagInputError(
+            f"this sweep's blocks call batched LAPACK routines ({', '.join(found)}), which hang when {workers} "
+            f"host threads run blocks at once. Give chunk=1 (one member per call: its solves are unbatched) or "
+            f"workers=1.")
+
+
+def _run_blocks(fn, names, cols, chunk, progress, edges, workers=1):
+    """Unsharded evaluation block by block (``chunk`` members per compiled call, the last block padded by
+    repeating its last member), the blocks run in ``workers`` host threads (in order of their members; one
+    compiled program, compiled once before the threads start), with a tqdm bar over the members on stderr when
+    ``progress``. A block of one member runs the unbatched member program (:func:`_member_program`)."""
+    from concurrent.futures import ThreadPoolExecutor
 
     n = cols[0].shape[0]
-    block = n if chunk is None else min(chunk, n)
-    prog, meta = _compiled(fn, tuple(names), block, None, len(cols), edges)
-    parts = []
-    desc = progress if isinstance(progress, str) else "sweep"
-    with tqdm(total=n, desc=desc, unit="member", dynamic_ncols=True) as bar:
-        for i in range(0, n, block):
-            c = [x[i:i + block] for x in cols]
-            k = c[0].shape[0]
-            if k < block:
-                c = [np.concatenate([x, np.repeat(x[-1:], block - k)]) for x in c]
-            out = prog(*[jnp.asarray(x) for x in c])
-            parts.append({key: np.asarray(v)[:k] for key, v in out.items()})
-            bar.update(k)
+    block = -(-n // workers) if chunk is None else min(chunk, n)
+    if block == 1:
+        prog, meta = _member_program(fn, tuple(names), len(cols), edges)
+    else:
+        prog, meta = _compiled(fn, tuple(names), block, None, len(cols), edges)
+    blocks = []
+    for i in range(0, n, block):
+        c = [x[i:i + block] for x in cols]
+        k = c[0].shape[0]
+        if k < block:
+            c = [np.concatenate([x, np.repeat(x[-1:], block - k)]) for x in c]
+        blocks.append((k, c))
+    first = [jnp.asarray(x) for x in blocks[0][1]]
+    if workers > 1:
+        lowered = prog.lower(*first)
+        _refuse_batched_lapack_in_threads(lowered, workers)
+        prog = lowered.compile()   # compiled once, here, not by the first call of every thread
+
+    def run(b):
+        k, c = b
+        out = prog(*[jnp.asarray(x) for x in c])
+        return {key: np.asarray(v)[:k] for key, v in out.items()}
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+        bar = tqdm(total=n, desc=progress if isinstance(progress, str) else "sweep", unit="member",
+                   dynamic_ncols=True)
+    try:
+        if workers == 1:
+            parts = []
+            for b in blocks:
+                parts.append(run(b))
+                if bar is not None:
+                    bar.update(b[0])
+        else:
+            ex = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="jaxcoag-sweep")
+            try:
+                futs = [ex.submit(run, b) for b in blocks]
+                for f, b in zip(futs, blocks):
+                    f.result()
+                    if bar is not None:
+                        bar.update(b[0])
+                parts = [f.result() for f in futs]
+            finally:   # Ctrl-C or a failed block: blocks not yet started are dropped
+                ex.shutdown(wait=True, cancel_futures=True)
+    finally:
+        if bar is not None:
+            bar.close()
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}, meta
 
 
-def _run(fn, names, cols, chunk, mesh, progress=False, edges=None):
+def _run(fn, names, cols, chunk, mesh, progress=False, edges=None, workers=1):
     """Evaluate fn over flat columns (tuple of (N,) arrays); returns (dict of (N, ...) numpy, meta)."""
     n = cols[0].shape[0]
-    if progress and mesh is None:
-        return _run_blocks(fn, names, cols, chunk, progress, edges)
+    if (progress or workers > 1 or chunk == 1) and mesh is None:   # chunk=1: the unbatched member program
+        return _run_blocks(fn, names, cols, chunk, progress, edges, workers)
     prog, meta = _compiled(fn, tuple(names), chunk, mesh, len(cols), edges)
     if mesh is None:
         out = prog(*[jnp.asarray(c) for c in cols])
@@ -356,7 +433,7 @@ def _refuse_cpu_lapack(prog, args, mesh):
 
 
 def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attrs=None, invalid="raise",
-          progress=False, edges=None, dims=None):
+          progress=False, edges=None, dims=None, workers=None):
     """Evaluate ``fn(**point)`` over a parameter grid in one vmapped (optionally sharded) program.
 
     Arguments:
@@ -369,7 +446,8 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         grid: "outer" (every combination; dims = the parameter names in dict order) or "zip"
             (matched tuples; one dim ``member`` with the parameters as coordinates on it).
         chunk: members per vmapped batch (``jax.lax.map`` batch size); None = all at once
-            (per device when sharded). On CPU, 16 - 256 is 3 - 10x faster than one wide batch.
+            (per device when sharded, per worker with ``workers``). On CPU, 16 - 256 is 3 - 10x faster than
+            one wide batch for cheap members; ``chunk=1`` runs each member as a single, unbatched solve.
         mesh: ``jax.sharding.Mesh`` to shard the members over (split across all mesh axes).
         devices: list of devices; shorthand for ``mesh=Mesh(devices, ("members",))``.
         attrs: dict of global attributes for the dataset (scene, fixed parameters, ...).
@@ -388,6 +466,14 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         edges: mass-bin edges [g] (1-D increasing) of the binned view when fn returns an engine
             result; default None = the engine's own bins (the binned grid). Needed for Monte Carlo
             results, whose automatic bins depend on the data.
+        workers: host threads that run blocks of ``chunk`` members at once (default None = 1). One compiled
+            program serves every block; XLA releases the GIL while a block runs, so on a CPU host each worker
+            keeps a core busy: a member's event or step loop is sequential and uses one core, so ``workers=
+            os.cpu_count()`` is how a sweep uses the machine (e.g. 8 fragmentation solves of the default box,
+            chunk=1, workers=2 on 2 cores: benchmarks/frag_sweep_throughput.py). With an explicit ``chunk`` the
+            results equal those of ``workers=1``. Not with ``mesh``/``devices`` (the devices already run in
+            parallel). Blocks whose program calls batched LAPACK routines are refused before anything runs
+            (they hang in several threads; give ``chunk=1``).
         dims: dict output name -> sequence of dimension names for that output's axes beyond the parameters
             (e.g. ``{"sigma_dust": ("t", "r")}`` for a (T, Nr) output); outputs not named keep the default
             names. A name may be shared by several outputs (their lengths must agree) but not by a parameter.
@@ -417,6 +503,13 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
         raise JaxcoagInputError(f"invalid must be 'raise' or 'flag' (what to do with NaN/inf parameter values); "
                                 f"got {invalid!r}.")
     mesh = _resolve_mesh(mesh, devices)
+    if workers is not None:
+        if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+            raise JaxcoagInputError(f"workers must be a positive int (host threads) or None; got {workers!r}.")
+        if mesh is not None and workers > 1:
+            raise JaxcoagInputError("give workers= or mesh=/devices=, not both: sharded members already run in "
+                                    "parallel on the devices.")
+    workers = 1 if workers is None else int(workers)
     points, shape = parameter_points(params, grid, allow_nonfinite=invalid == "flag")
     names = list(points)
     _check_signature(fn, names)
@@ -451,7 +544,7 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
                 raise JaxcoagInputError(f"dims[{k!r}] = {v!r} repeats a name or reuses a parameter's dimension "
                                         f"({', '.join(names) if grid == 'outer' else 'member'}); rename it.")
         _check_dims(dims, fn, names, cols, edges)
-    out, meta = _run(fn, names, cols, chunk, mesh, progress, edges)
+    out, meta = _run(fn, names, cols, chunk, mesh, progress, edges, workers)
     if bad.any():
         from ._status import RESULT_NAMES
         for k, v in out.items():
@@ -514,7 +607,7 @@ def sweep(fn, params, *, grid="outer", chunk=None, mesh=None, devices=None, attr
 
     nfail = int(np.sum(np.isin(np.asarray(out["status"]), [RESULT_NAMES.index(n) for n in FAILURES])))
     ds.attrs.update({"n_members": int(math.prod(shape)), "n_failed": nfail, "grid": grid,
-                     "n_devices": 1 if mesh is None else int(math.prod(mesh.devices.shape))})
+                     "n_devices": 1 if mesh is None else int(math.prod(mesh.devices.shape)), "n_workers": workers})
     if attrs:
         from .io import _attr_value
         for k, v in attrs.items():

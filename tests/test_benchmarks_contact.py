@@ -113,5 +113,8 @@ def test_quick_run_our_side_json(tmp_path):
     s = data["sweep"]
     assert s["members"] == 8 and s["max_abs_diff_x"] < 1e-12 * 1e-3
     assert s["speedup"] == pytest.approx(s["loop_s"] / s["vmap_s"], rel=1e-6)
+    # the threaded sweep runs the same single integration per member: the loop's positions exactly
+    assert s["workers"] >= 1 and s["max_abs_diff_x_workers"] == 0.0
+    assert s["speedup_workers"] == pytest.approx(s["loop_s"] / s["workers_s"], rel=1e-6)
     assert data["machine"]["logical_cores"] >= 1
     assert out.with_suffix(".png").exists()

@@ -303,3 +303,19 @@ def test_sweep_collisions_small_ice():
     assert float(tab.f_large[0, 0]) == 1.0 and float(tab.f_large[0, 1]) <= 0.5
     assert float(tab.n_con[0, 0]) >= 7.0 / 8.0
     np.testing.assert_array_equal(np.asarray(tab.n_runs), 1.0)
+
+
+def test_sweep_collisions_workers_give_the_same_table():
+    """Collisions run two at a time in host threads give the one-after-another table exactly (each collision has
+    its own key, the averages are summed in one order): 2-D BCCAs of 2 and 4 monomers, 2 structures, 2 speeds."""
+    v = np.array([0.5, 20.0]) * V0
+    kw = dict(n_structures=2, dt=0.112 * float(ICE.t_c), quiet_steps=500)
+    one = bridge.sweep_collisions([2, 4], v, ICE, jax.random.PRNGKey(5), **kw)
+    two = bridge.sweep_collisions([2, 4], v, ICE, jax.random.PRNGKey(5), workers=2, **kw)
+    for name in ("f_large", "rg_ratio", "n_con", "f_second", "r_g", "n_runs", "x_break"):
+        np.testing.assert_array_equal(np.asarray(getattr(two, name)), np.asarray(getattr(one, name)))
+    assert float(one.f_large[0, 0]) == 1.0   # 2 + 2 monomers at 0.5 v0 stick
+    with pytest.raises(JaxcoagInputError, match="workers must be a positive int"):
+        bridge.sweep_collisions([2], v, ICE, jax.random.PRNGKey(5), workers=0)
+    with pytest.raises(JaxcoagInputError, match="workers=1 only"):
+        bridge.sweep_collisions([2], v, ICE, jax.random.PRNGKey(5), workers=2, progress=True)

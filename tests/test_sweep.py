@@ -103,10 +103,72 @@ def test_parameter_points_outer_order():
     ({"a": [1.0]}, {"chunk": 0}, "chunk"),
     ({"a": [1.0]}, {"mesh": "cpu"}, "Mesh"),
     ({"a": [1.0]}, {"devices": []}, "empty"),
+    ({"a": [1.0]}, {"workers": 0}, "workers must be a positive int"),
+    ({"a": [1.0]}, {"workers": True}, "workers must be a positive int"),
+    ({"a": [1.0]}, {"workers": 1.5}, "workers must be a positive int"),
 ])
 def test_bad_input(params, kw, match):
     with pytest.raises(JaxcoagInputError, match=match):
         sweep(lambda a, b=0.0: a, params, **kw)
+
+
+def test_workers_with_devices_refused():
+    import jax
+
+    with pytest.raises(JaxcoagInputError, match="not both"):
+        sweep(lambda a: a, {"a": [1.0, 2.0]}, workers=2, devices=jax.devices())
+
+
+def test_workers_give_the_single_thread_results():
+    """Blocks run in host threads return exactly what one thread returns with the same chunk, in member order;
+    chunk=1 runs each member as its own unbatched program, equal to the loop of single solves."""
+    p = {"k0": [0.5, 1.0, 2.0], "t_end": [1.0, 10.0, 1e8]}
+    one_thread = sweep(box, p, chunk=2)
+    threads = sweep(box, p, chunk=2, workers=3)
+    assert threads.attrs["n_workers"] == 3 and one_thread.attrs["n_workers"] == 1
+    for k in ("mass_per_bin", "gel_mass", "mass_drift", "steps", "status", "t_out"):
+        np.testing.assert_array_equal(threads[k].values, one_thread[k].values)
+    singles = sweep(box, p, chunk=1, workers=2)
+    np.testing.assert_array_equal(singles["mass_per_bin"].values, sweep(box, p, chunk=1)["mass_per_bin"].values)
+    for i, k0 in enumerate(p["k0"]):
+        for j, te in enumerate(p["t_end"][:2]):
+            np.testing.assert_allclose(singles["mass_per_bin"].values[i, j], np.asarray(box(k0, te).mass_per_bin()),
+                                       rtol=1e-12, atol=1e-14)
+    assert list(singles["status"].values[:, 2]) == [RESULT_NAMES.index("max_steps_reached")] * 3
+
+
+def test_workers_run_blocks_at_the_same_time():
+    """Two single-member blocks, two workers: each member's program waits (in a host callback) until the other
+    one has started. Run one after another, the wait times out and the sweep raises."""
+    import threading
+
+    import jax
+
+    barrier = threading.Barrier(2, timeout=60)
+
+    def meet(x):
+        barrier.wait()
+        return np.asarray(x)
+
+    def f(a):
+        return {"y": jax.pure_callback(meet, jax.ShapeDtypeStruct((), jnp.float64), a) * 2.0}
+
+    out = sweep(f, {"a": [1.0, 2.0]}, chunk=1, workers=2)
+    np.testing.assert_array_equal(out["y"].values, [2.0, 4.0])
+
+
+def test_workers_refuse_batched_lapack_blocks():
+    """A block of several members whose solves become batched LAPACK calls hangs in several threads: refused
+    before it runs; one member per block runs (its solves are unbatched) and gives the loop's values."""
+    def f(a):
+        A = a * jnp.eye(3) + 1.0
+        return {"x": jnp.linalg.solve(A, jnp.ones(3))}
+
+    with pytest.raises(JaxcoagInputError, match="batched LAPACK.*chunk=1"):
+        sweep(f, {"a": [1.0, 2.0, 3.0, 4.0]}, chunk=2, workers=2)
+    out = sweep(f, {"a": [1.0, 2.0, 3.0, 4.0]}, chunk=1, workers=2)
+    for i, a in enumerate([1.0, 2.0, 3.0, 4.0]):
+        np.testing.assert_allclose(out["x"].values[i], np.full(3, 1.0 / (a + 3.0)), rtol=1e-14)
 
 
 SHARD_SCRIPT = textwrap.dedent("""

@@ -345,7 +345,7 @@ class CollisionOutcome(RecipeOutcome):
 
 
 def sweep_collisions(sizes, v_imps, material, key, n_structures: int = 3, *, dim: int = 2, copy: bool = True,
-                     dt=None, t_end=None, quiet_steps: int = 10_000, **collide_kwargs) -> CollisionTable:
+                     dt=None, t_end=None, quiet_steps: int = 10_000, workers=None, **collide_kwargs) -> CollisionTable:
     """Run head-on collisions of BCCA pairs over sizes x impact speeds and tabulate their outcomes.
 
     For every size n (monomers per aggregate, a power of 2) and structure k < ``n_structures`` a BCCA is built
@@ -353,7 +353,10 @@ def sweep_collisions(sizes, v_imps, material, key, n_structures: int = 3, *, dim
     default of Wada et al. 2007 §4: "the same BCCA", both copies independently rotated by ``collide``'s key) or
     with an independent BCCA (``copy=False``) at every speed of ``v_imps``. The collisions run one after another
     (``collide`` runs until the outcome settles, a run length that depends on the speed, so a vmap over speeds
-    would run every lane to the slowest one). Runs whose status is a failure are left out of the averages.
+    would run every lane to the slowest one), ``workers`` of them at a time in host threads: a collision's step
+    loop is sequential and keeps one core busy, so ``workers=os.cpu_count()`` uses the machine. The table does not
+    depend on ``workers`` (every collision has its own key; the averages are summed in one fixed order). Runs
+    whose status is a failure are left out of the averages.
 
     Arguments:
         sizes: monomers per aggregate (ints, powers of 2, >= 2); N_total = 2 n.
@@ -365,6 +368,8 @@ def sweep_collisions(sizes, v_imps, material, key, n_structures: int = 3, *, dim
         copy: collide each BCCA with a rotated copy of itself (True) or with an independent one.
         dt: time step [s] (None: 0.014 t_c; sweeps may use up to 0.112 t_c, Wada et al. §4).
         t_end, quiet_steps, collide_kwargs: passed to ``collide``.
+        workers: collisions run at once in host threads (default None = 1, one after another). ``checkpoint``
+            and ``progress`` (collide_kwargs) are refused with workers > 1 (one file and one bar per collision).
 
     Returns:
         :class:`CollisionTable` (rows: sizes, columns: speeds; structure averages).
@@ -385,27 +390,50 @@ def sweep_collisions(sizes, v_imps, material, key, n_structures: int = 3, *, dim
         raise JaxcoagInputError(f"n_structures must be an int >= 1; got {n_structures!r}.")
     from ..._status import is_failure
 
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
+                                or workers < 1):
+        raise JaxcoagInputError(f"workers must be a positive int (host threads) or None; got {workers!r}.")
+    workers = 1 if workers is None else int(workers)
+    if workers > 1 and (collide_kwargs.get("checkpoint") is not None or collide_kwargs.get("progress")):
+        raise JaxcoagInputError("checkpoint= and progress= name one file and one bar per collide call; give them "
+                                "with workers=1 only.")
+
     S, V = len(sizes), v.size
-    acc = {k: np.zeros((S, V)) for k in ("f_large", "rg_ratio", "n_con", "f_second", "r_g", "n")}
+    tasks = []   # (size index, speed index, a, b, speed, key), in the order of the sums below
     for i, n in enumerate(sizes):
         for k in range(n_structures):
             kk = jax.random.fold_in(jax.random.fold_in(key, i), k)
             ka, kb, kr = jax.random.split(kk, 3)
             a = bcca(n, ka, dim, material=material)
             b = a if copy else bcca(n, kb, dim, material=material)
-            for j, vj in enumerate(v):
-                res = collide(a, b, float(vj), material, key=jax.random.fold_in(kr, j), dt=dt, t_end=t_end,
-                              quiet_steps=quiet_steps, throw=False, **collide_kwargs)
-                if bool(is_failure(res.status)):
-                    continue
-                cs = np.asarray(res.cluster_sizes, np.float64)
-                nt = float(2 * n)
-                acc["f_large"][i, j] += cs[0] / nt
-                acc["f_second"][i, j] += (cs[1] if cs.size > 1 else 0.0) / nt
-                acc["rg_ratio"][i, j] += float(res.r_g) / float(res.final_state.r_g0)
-                acc["n_con"][i, j] += float(res.n_contacts)
-                acc["r_g"][i, j] += float(res.r_g)
-                acc["n"][i, j] += 1.0
+            tasks.extend((i, j, a, b, float(vj), jax.random.fold_in(kr, j)) for j, vj in enumerate(v))
+
+    def run(task):
+        _, _, a, b, vj, kj = task
+        return collide(a, b, vj, material, key=kj, dt=dt, t_end=t_end, quiet_steps=quiet_steps, throw=False,
+                       **collide_kwargs)
+
+    if workers == 1:
+        results = map(run, tasks)
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+        ex = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="jaxcoag-collide")
+        try:
+            results = [f.result() for f in [ex.submit(run, t) for t in tasks]]
+        finally:   # Ctrl-C or a failed collision: the collisions not yet started are dropped
+            ex.shutdown(wait=True, cancel_futures=True)
+    acc = {k: np.zeros((S, V)) for k in ("f_large", "rg_ratio", "n_con", "f_second", "r_g", "n")}
+    for (i, j, a, _, _, _), res in zip(tasks, results):
+        if bool(is_failure(res.status)):
+            continue
+        cs = np.asarray(res.cluster_sizes, np.float64)
+        nt = float(2 * sizes[i])
+        acc["f_large"][i, j] += cs[0] / nt
+        acc["f_second"][i, j] += (cs[1] if cs.size > 1 else 0.0) / nt
+        acc["rg_ratio"][i, j] += float(res.r_g) / float(res.final_state.r_g0)
+        acc["n_con"][i, j] += float(res.n_contacts)
+        acc["r_g"][i, j] += float(res.r_g)
+        acc["n"][i, j] += 1.0
     cnt = acc["n"]
     if np.any(cnt == 0):
         raise JaxcoagInputError("sweep_collisions: every structure failed for some (size, speed); check dt, the "
