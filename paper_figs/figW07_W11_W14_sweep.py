@@ -22,7 +22,8 @@ used (``collide`` takes one scalar v_imp, and runs at different speeds have diff
 
 Reduced sweep (full mode of this script; measured 2015 s of runs for its 28 collisions, 1.9e6 steps, plus ~90 s
 of compilation per size, under load with the first contact layout; 301 s in all, compilation included, on idle
-cores with the flat contact list of stop 29):
+cores with the flat contact list of stop 29; one collision after another: the script now runs ``--workers``
+collisions at a time in host threads, default one per core):
 * N_total = 64 (32 + 32): ice 30 A, 2 structures, v_imp = 1-18 v_0 (8 speeds, 7 for the second structure;
   x_roll 0.003-0.93, x_break 0.08-27); ice 2 A, 1 structure, v_imp = 1, 2, 3, 4.9, 8 v_0 (x_roll 0.04-2.8);
 * N_total = 256 (128 + 128): ice 30 A, 2 structures, v_imp = 1.5, 2.3, 3.5, 5.3 v_0 (x_roll 0.006-0.08: the range
@@ -129,22 +130,44 @@ def _key(label, n, s, v):
     return f"{label}|{n}|{s}|{v:g}"
 
 
-def run_sweep(plan, cache, budget_s=None, *, dt_tc=DT_TC, span=8.0, log=print):
-    """Run the plan's collisions not yet in ``cache`` (a JSON path; written after each), within ``budget_s``."""
+def run_sweep(plan, cache, budget_s=None, *, dt_tc=DT_TC, span=8.0, log=print, workers=None):
+    """Run the plan's collisions not yet in ``cache`` (a JSON path; written after each), within ``budget_s``, and
+    ``workers`` of them at a time in host threads (default: the core count; a collision keeps one core busy).
+    The returned dict (and the cache) lists the collisions in the plan's order."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
     data = json.loads(cache.read_text()) if cache.exists() else {}
+    jobs = [(label, n, s, v) for label, n, structures, speeds in plan for s in structures for v in speeds]
+    todo = iter([j for j in jobs if _key(*j) not in data])
+    workers = workers or os.cpu_count() or 1
     t0 = time.time()
-    for label, n, structures, speeds in plan:
-        for s in structures:
-            for v in speeds:
-                k = _key(label, n, s, v)
-                if k in data:
-                    continue
-                if budget_s is not None and time.time() - t0 > budget_s:
-                    log(f"  budget of {budget_s:.0f} s spent: {k} and later ones not run")
-                    return data
-                data[k] = run_one(label, n, s, v, dt_tc=dt_tc, span=span, log=log)
-                cache.write_text(json.dumps(data, indent=1))
-    return data
+    running = {}
+    stopped = False
+
+    def ordered(d):
+        return {_key(*j): d[_key(*j)] for j in jobs if _key(*j) in d}
+
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="figW07-sweep") as ex:
+        def submit():
+            nonlocal stopped
+            job = None if stopped else next(todo, None)
+            if job is None:
+                return
+            if budget_s is not None and time.time() - t0 > budget_s:
+                log(f"  budget of {budget_s:.0f} s spent: {_key(*job)} and later ones not run")
+                stopped = True
+                return
+            running[ex.submit(run_one, *job, dt_tc=dt_tc, span=span, log=log)] = _key(*job)
+
+        for _ in range(workers):
+            submit()
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for f in done:
+                data[running.pop(f)] = f.result()
+                cache.write_text(json.dumps(ordered(data), indent=1))
+                submit()
+    return ordered(data)
 
 
 def fit_power(x, y):
@@ -314,8 +337,15 @@ def draw(rows, plt, fits):
 
 
 def main(argv=None):
-    args = _common.parse_args(argv, __doc__, extra=lambda p: p.add_argument(
-        "--budget-s", type=float, default=None, help="stop starting new collisions after this many seconds"))
+    def extra(p):
+        p.add_argument("--budget-s", type=float, default=None, help="stop starting new collisions after this many "
+                       "seconds")
+        p.add_argument("--workers", type=int, default=None, help="collisions run at a time in host threads (default: "
+                       "the core count)")
+
+    args = _common.parse_args(argv, __doc__, extra=extra)
+    if args.workers is not None and args.workers < 1:
+        raise SystemExit(f"--workers must be >= 1; got {args.workers}.")
     if args.budget_s is not None and not args.budget_s > 0:
         raise SystemExit(f"--budget-s must be > 0 seconds; got {args.budget_s}.")
     _common.enable_x64()
@@ -327,7 +357,7 @@ def main(argv=None):
         cache.unlink()  # the quick run always reruns (it is the test)
     t0 = time.time()
     data = run_sweep(plan, cache, args.budget_s, dt_tc=0.112 if args.quick else DT_TC,
-                     span=4.0 if args.quick else 8.0)
+                     span=4.0 if args.quick else 8.0, workers=args.workers)
     rows = list(data.values())
     ran = sum(r["wall_s"] for r in rows)
     steps = sum(r["steps"] for r in rows)
