@@ -263,6 +263,66 @@ def _two_chains(n, gap, v_rel):
     return dem.init_state(np.concatenate([xa, xb]), v, np.zeros((2 * n, 3)), MAT, dim=2)
 
 
+def _listed_and_brute(st):
+    """(the list of non-contact neighbour pairs held by the state, the same by brute force), both sorted."""
+    N, nbr, act = st.x.shape[0], np.asarray(st.nbr), np.asarray(st.active)
+    contacts = set(zip(np.asarray(st.ci)[act].tolist(), np.asarray(st.cj)[act].tolist()))
+    brute = sorted((i, int(j)) for i in range(N) for j in nbr[i] if j < N and (i, int(j)) not in contacts)
+    listed = sorted((int(a), int(b)) for a, b in zip(np.asarray(st.cand_i), np.asarray(st.cand_j)) if a < N)
+    return listed, brute
+
+
+def test_creation_trigger_list_of_non_contact_pairs_and_its_overflow(monkeypatch):
+    """The short list of neighbour pairs that are not contacts (dem._candidates at a build, then dem._add_candidates
+    after breakings and the creation branch; the step tests it for touching instead of the whole neighbour list)
+    equals the neighbour
+    pairs minus the contacts (brute force) every 25 steps of two chains that meet at 2 v0 (40 contacts form in one
+    step) and at 8 v0 (they form, then break: the freed pairs go back on the list). With a list of one slot it
+    overflows and the step runs the creation search on every step instead: the same steps create and
+    break the same contacts, to the bit. Under jax.vmap (both speeds as members: one member's events make both
+    take the update) every member equals its single run."""
+    runs = {}
+    for label in ("list", "overflow"):
+        if label == "overflow":
+            monkeypatch.setattr(dem, "_cand_capacity", lambda n: 1)
+            jax.clear_caches()
+        for speed in (2.0, 8.0):
+            st = _two_chains(40, 0.05 * R1, speed * V0)
+            seq = [st]
+            for _ in range(12):
+                st, _ = dem.integrate(st, MAT, 25, dt=DT, chunk=25)
+                seq.append(st)
+            runs[label, speed] = seq
+    monkeypatch.undo()
+    jax.clear_caches()  # the jitted init_state of the one-slot list must not serve later tests
+    for speed, n_end in ((2.0, 118), (8.0, None)):
+        lst, ovf = runs["list", speed], runs["overflow", speed]
+        assert not bool(lst[0].cand_full) and bool(ovf[0].cand_full)
+        for st in lst:
+            listed, brute = _listed_and_brute(st)
+            assert listed == brute and not bool(st.cand_full)
+        for k in ("ci", "cj", "active", "x", "v", "w", "E_dis", "n_events"):
+            np.testing.assert_array_equal(np.asarray(getattr(ovf[-1], k)), np.asarray(getattr(lst[-1], k)), err_msg=k)
+        if n_end is not None:
+            assert int(jnp.sum(lst[-1].active)) == n_end
+    # at 8 v0 the cross-chain contacts form and break again: events beyond the 40 creations, and fewer contacts
+    # at the end than at their most
+    fast = runs["list", 8.0]
+    most = max(int(jnp.sum(s.active)) for s in fast)
+    assert most >= 118 and int(jnp.sum(fast[-1].active)) < most and int(fast[-1].n_events) > 40
+    # vmapped members (2 v0 and 8 v0): each equals its single run
+    b0 = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), _two_chains(40, 0.05 * R1, 2.0 * V0),
+                                _two_chains(40, 0.05 * R1, 8.0 * V0))
+    bv = jax.vmap(lambda s: dem.integrate(s, MAT, 300, dt=DT, chunk=25)[0])(b0)
+    for m, speed in enumerate((2.0, 8.0)):
+        one = jax.tree_util.tree_map(lambda a: a[m], bv)
+        listed, brute = _listed_and_brute(one)
+        assert listed == brute
+        for k in ("ci", "cj", "active", "x", "E_dis"):
+            np.testing.assert_allclose(np.asarray(getattr(one, k)), np.asarray(getattr(runs["list", speed][-1], k)),
+                                       rtol=1e-12, atol=1e-12 * R1 if k == "x" else 0, err_msg=k)
+
+
 @pytest.mark.parametrize("system", ["chains", pytest.param("bcca3d", marks=pytest.mark.slow)])
 def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
     """Blocks of steps over the prefix of the contact list that holds the used slots (dem._steps) against steps

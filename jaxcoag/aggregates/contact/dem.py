@@ -184,6 +184,10 @@ class DEMState(eqx.Module):
         first_event: int64, step of the first creation or breaking (-1: none yet).
         last_event: int64, step of the latest creation or breaking (-1: none yet).
         n_builds: int64, neighbour-list builds since the start.
+        cand_i, cand_j: (K_c,) int32 the neighbour pairs i < j that are not contacts (N = empty), compacted
+            (:func:`_candidates`): the pairs that can form a contact, which the step tests for touching.
+        cand_full: bool, more such pairs than K_c (the step then runs the creation search on every step until the
+            next neighbour-list build).
     """
 
     x: jax.Array
@@ -215,6 +219,9 @@ class DEMState(eqx.Module):
     first_event: jax.Array
     last_event: jax.Array
     n_builds: jax.Array
+    cand_i: jax.Array
+    cand_j: jax.Array
+    cand_full: jax.Array
 
     @property
     def dim(self) -> int:
@@ -399,6 +406,54 @@ def _build_neighbours(x, cutoff, n_nb, dim):
 
 
 # ------------------------------------------------------------------------------------------------- contacts
+def _cand_capacity(n_mono: int) -> int:
+    """Slots of the list of non-contact neighbour pairs (:func:`_candidates`): N/2, at least 64. A colliding pair
+    of 2-D 256-monomer BCCAs has 23-29 such pairs (of 4 096 neighbour-table entries) throughout its collision."""
+    return max(64, n_mono // 2)
+
+
+def _candidates(nbr, ci, cj, active, K=None):
+    """The neighbour pairs (i, nbr[i, k]) that are not active contacts, compacted into K slots (default
+    ``_cand_capacity(N)``; a step keeps the size of its state's list) (N = empty), and whether there were more (then the step runs the creation search on every step until the next build).
+
+    A contact can form only between such a pair (every contact is a neighbour pair: it breaks before its centres
+    are 2 r1 + delta_c apart, inside the list's cutoff), so a step needs to test only these for touching instead of
+    all N x K_nb entries of the neighbour list. Built here (the sorted-key lookup of :func:`_create`) at the start
+    and after every neighbour-list build; a step with contact events updates it in place (a breaking adds its pair:
+    :func:`_add_candidates`; a creation removes its pairs). Returns (cand_i, cand_j, full)."""
+    N, Kn = nbr.shape
+    C = ci.shape[0]
+    K = _cand_capacity(N) if K is None else K
+    n64 = jnp.int64(N)
+    keys = jnp.sort(jnp.where(active, ci.astype(jnp.int64) * n64 + cj, n64 * n64))
+    flat = nbr.reshape(-1)
+    ckey = jnp.repeat(jnp.arange(N, dtype=jnp.int64), Kn) * n64 + flat
+    contact = keys[jnp.minimum(jnp.searchsorted(keys, ckey), C - 1)] == ckey
+    cand = (flat < N) & ~contact
+    idx = jnp.nonzero(cand, size=K, fill_value=N * Kn)[0]
+    ok = idx < N * Kn
+    cand_i = jnp.where(ok, idx // Kn, N).astype(jnp.int32)
+    cand_j = jnp.where(ok, flat[jnp.minimum(idx, N * Kn - 1)], N).astype(jnp.int32)
+    return cand_i, cand_j, jnp.sum(cand) > K
+
+
+def _add_candidates(cand_i, cand_j, cand_full, freed, ci_old, cj_old, N):
+    """The list of non-contact neighbour pairs (:func:`_candidates`) after contacts broke, without a new search: the
+    broken contacts (``freed``, (C,) mask over the pairs ``ci_old``, ``cj_old``; neighbour pairs, since a contact
+    breaks inside the list's cutoff) fill the empty slots (index ``N``) in slot order. O(K + C) and no sort, so that
+    under ``jax.vmap``, where every member takes this branch when one has a breaking, it stays cheap. More pairs
+    than slots set ``full`` (the step then runs the creation search every step until the next build). The pairs that
+    a creation takes leave the list in the creation branch of the step. Returns (cand_i, cand_j, full)."""
+    K = cand_i.shape[0]
+    empty = cand_i >= N
+    slots = jnp.nonzero(empty, size=K, fill_value=K)[0]
+    rank = jnp.cumsum(freed) - 1
+    tgt = jnp.where(freed & (rank < K), slots[jnp.clip(rank, 0, K - 1)], K)
+    cand_i = cand_i.at[tgt].set(ci_old.astype(cand_i.dtype), mode="drop")
+    cand_j = cand_j.at[tgt].set(cj_old.astype(cand_j.dtype), mode="drop")
+    return cand_i, cand_j, cand_full | (jnp.sum(freed) > jnp.sum(empty))
+
+
 def _create(x, ci, cj, active, n_i, n_j, phi, nbr, mat):
     """New contacts for the neighbour pairs with delta >= 0 not yet in contact (Wada et al. 2007 §2.1).
 
@@ -631,6 +686,7 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
     z3 = jnp.zeros((C, 3))
     ci, cj, active, n_i, n_j, phi, _, ovf_c = _create(x, ci, ci, active, z3, z3, jnp.zeros((C,)), nbr, mat)
     F, M, U = _evaluate(x, ci, cj, active, n_i, n_j, phi, mat)
+    cand_i, cand_j, cand_full = _candidates(nbr, ci, cj, active)
     flags = jnp.where(ovf_c, FLAG_CONTACTS, 0) | jnp.where(ovf_nb, FLAG_NEIGHBOURS, 0)
     i64 = lambda n: jnp.asarray(n, jnp.int64)  # noqa: E731
     none = jnp.full((2 * C,), N, jnp.int32)
@@ -640,7 +696,7 @@ def _init_impl(x, v, w, mat, skin, t0, *, dim, K, Kn):
                     axes=jnp.ones((dim,), bool),
                     step=i64(0), t0=t0,
                     flags=flags.astype(jnp.int32), n_events=i64(0), first_event=i64(-1), last_event=i64(-1),
-                    n_builds=i64(1))
+                    n_builds=i64(1), cand_i=cand_i, cand_j=cand_j, cand_full=cand_full)
 
 
 # ------------------------------------------------------------------------------------------------- step
@@ -778,6 +834,7 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
     flags = st.flags
     n_ev = jnp.zeros((), jnp.int64)
     nbr, x_ref, n_builds = st.nbr, st.x_ref, st.n_builds
+    cand_i, cand_j, cand_full = st.cand_i, st.cand_j, st.cand_full
     new = jnp.zeros_like(active)
     # event times (module docstring): the correction applied at st.x did the work (1/2) Fe.dx in this step's first
     # half kick; corrections are made only by this step's events (else Fe = 0 and nothing is pending)
@@ -801,37 +858,46 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
         def book_breaking(_):
             Uc_b, Fc_b, Mc1_b, Mc2_b = broken_forces()
             wb = _half_work(Fc_b, Mc1_b, Mc2_b, gi, gj)
-            return jnp.sum(Uc_b, axis=0).at[0].add(-jnp.sum(wb))
+            # the broken contacts' pairs go back on the list of non-contact neighbour pairs (a neighbour-list build
+            # below, in this step, would list them anyway)
+            return (jnp.sum(Uc_b, axis=0).at[0].add(-jnp.sum(wb)),
+                    *_add_candidates(st.cand_i, st.cand_j, st.cand_full, broken, ci_old, cj_old, N))
 
-        E_dis = E_dis + _cond_members(n_broken > 0, book_breaking, lambda _: jnp.zeros(4), None)
+        dE_b, cand_i, cand_j, cand_full = _cond_members(
+            n_broken > 0, book_breaking, lambda _: (jnp.zeros(4), st.cand_i, st.cand_j, st.cand_full), None)
+        E_dis = E_dis + dE_b
         cutoff = (2.0 + skin) * r1
         disp2 = jnp.max(_dot(x - st.x_ref, x - st.x_ref))
         rebuild = disp2 > (0.5 * skin * r1) ** 2
 
         def build(_):
             nb, ovf = _build_neighbours(x, cutoff, nbr.shape[1], cfg.dim)
-            return nb, x, ovf
+            return (nb, x, ovf, *_candidates(nb, ci, cj, active, cand_i.shape[0]))
 
         def keep(_):
-            return nbr, x_ref, jnp.zeros((), bool)
+            return nbr, x_ref, jnp.zeros((), bool), cand_i, cand_j, cand_full
 
-        nbr, x_ref, ovf_nb = _cond_members(rebuild, build, keep, None)
+        nbr, x_ref, ovf_nb, cand_i, cand_j, cand_full = _cond_members(rebuild, build, keep, None)
         n_builds = n_builds + rebuild.astype(jnp.int64)
-        # creation is rare: the slot assignment runs only when some neighbour pair has delta >= 0 and no contact
-        # (a touching pair, delta >= 0, is in the Verlet list; it is new unless it is an active contact)
-        dxn = x[:, None, :] - _gather(x, nbr)
-        n_touch = jnp.sum(jnp.sum((nbr < N) & (_dot(dxn, dxn) <= (2.0 * r1) ** 2), axis=1, dtype=jnp.int32))
-        n_touch_old = jnp.sum(active & (2.0 * r1 - dist >= 0), dtype=jnp.int32)
+        # creation is rare: the slot assignment runs only when a neighbour pair that is not a contact touches
+        # (delta >= 0, computed as _create does, so that the pairs taken off the list are exactly the new contacts).
+        # Those pairs are the short list cand_i, cand_j (built with the neighbour list, kept up to date through the
+        # contact events; a contact broken in this step cannot touch: its centres are more than 2 r1 + delta_c
+        # apart). When the list overflowed (cand_full), the search runs on every step until the next build.
+        _, dist_c = _unit(_gather(x, cand_i) - _gather(x, cand_j))
+        touch = (cand_i < N) & (2.0 * r1 - dist_c >= 0)
 
         def create(args):
-            return _create(x, *args, nbr, mat)
+            *slots, c_i, c_j = args
+            c_i, c_j = jnp.where(touch, N, c_i), jnp.where(touch, N, c_j)   # the touching pairs are contacts now
+            return (*_create(x, *slots, nbr, mat), c_i, c_j)
 
         def no_create(args):
-            return (*args, jnp.zeros_like(args[2]), jnp.zeros((), bool))
+            *slots, c_i, c_j = args
+            return (*slots, jnp.zeros_like(slots[2]), jnp.zeros((), bool), c_i, c_j)
 
-        maybe_new = n_touch > n_touch_old
-        ci, cj, active, n_i, n_j, phi, new, ovf_c = _cond_members(
-            maybe_new, create, no_create, (ci, cj, active, n_i, n_j, phi))
+        ci, cj, active, n_i, n_j, phi, new, ovf_c, cand_i, cand_j = _cond_members(
+            jnp.any(touch) | cand_full, create, no_create, (ci, cj, active, n_i, n_j, phi, cand_i, cand_j))
         # pair ends of the new contacts (the rows gi, gj stay those of the slots before the creation: the branch
         # above does not pass them through, which made XLA copy both (C, 11) arrays on every step)
         gi_x = jnp.where(new[:, None], _gather(x, ci), gi[:, :3])
@@ -872,7 +938,8 @@ def _step_slots(st: DEMState, mat, dt, skin, cfg: _Cfg) -> DEMState:
                     ev_i=ev_i, ev_j=ev_j, ev_t=ev_t, axes=st.axes, step=stp, t0=st.t0,
                     flags=flags, n_events=st.n_events + n_ev,
                     first_event=jnp.where(event & (st.first_event < 0), stp, st.first_event),
-                    last_event=jnp.where(event, stp, st.last_event), n_builds=n_builds)
+                    last_event=jnp.where(event, stp, st.last_event), n_builds=n_builds, cand_i=cand_i,
+                    cand_j=cand_j, cand_full=cand_full)
 
 
 def _check_finite(st: DEMState) -> DEMState:
