@@ -36,12 +36,13 @@ runs of ``benchmarks/sweep_throughput.py`` on a shared, loaded 2-core machine).
 **Host threads (one CPU).** A member's step or event loop is sequential: one member keeps one core busy.
 Where a member is real work (a fragmentation solve of the default box, a DEM collision), a vmapped batch on a
 CPU is no faster than a loop of them (it runs every member until the slowest is done, and both branches of
-each batched ``lax.cond``; measured 0.85x and 0.68x of the loop's throughput). ``workers=W`` runs blocks of ``chunk``
-members in W host threads at once (XLA releases the GIL while a block runs) with one compiled program;
-``chunk=1`` makes every member its own unbatched program, equal to a single run. Measured on 2 cores, 8
-members, against a loop of single runs: the default box's fragmentation solves 2.06x (vmap 0.85x), Monte
-Carlo seeds 2.3 - 2.4x, contact-DEM impact speeds 2.6x (benchmarks/README.md). Blocks whose program calls
-batched LAPACK routines are refused with ``workers > 1`` (they hang there; ``chunk=1`` keeps them unbatched).
+each batched ``lax.cond``; measured 0.85x and 0.46x of the loop's throughput). ``workers=W`` runs blocks of
+``chunk`` members in W host threads at once (XLA releases the GIL while a block runs) with one compiled
+program; ``chunk=1`` makes every member its own unbatched program, equal to a single run. Measured on 2 cores,
+8 members, against a loop of single runs: the default box's fragmentation solves 2.06x, Monte Carlo seeds
+2.84x / 2.49x (Ns* = 100 / 400), contact-DEM impact speeds 2.0x (2000 steps each; benchmarks/README.md). Blocks
+whose program calls batched LAPACK routines are refused with ``workers > 1`` (they hang there; ``chunk=1`` keeps
+them unbatched).
 
 **Sharding (one host).** With ``mesh=`` (a ``jax.sharding.Mesh``; the member axis is split
 over all its axes) or ``devices=`` (a list of devices, one mesh axis ``"members"``) the

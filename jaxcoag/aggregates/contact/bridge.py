@@ -423,7 +423,7 @@ def sweep_collisions(sizes, v_imps, material, key, n_structures: int = 3, *, dim
         finally:   # Ctrl-C or a failed collision: the collisions not yet started are dropped
             ex.shutdown(wait=True, cancel_futures=True)
     acc = {k: np.zeros((S, V)) for k in ("f_large", "rg_ratio", "n_con", "f_second", "r_g", "n")}
-    for (i, j, a, _, _, _), res in zip(tasks, results):
+    for (i, j, *_), res in zip(tasks, results):
         if bool(is_failure(res.status)):
             continue
         cs = np.asarray(res.cluster_sizes, np.float64)

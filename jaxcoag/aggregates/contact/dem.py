@@ -414,7 +414,8 @@ def _cand_capacity(n_mono: int) -> int:
 
 def _candidates(nbr, ci, cj, active, K=None):
     """The neighbour pairs (i, nbr[i, k]) that are not active contacts, compacted into K slots (default
-    ``_cand_capacity(N)``; a step keeps the size of its state's list) (N = empty), and whether there were more (then the step runs the creation search on every step until the next build).
+    ``_cand_capacity(N)``; a step keeps the size of its state's list) (N = empty), and whether there were more
+    (then the step runs the creation search on every step until the next build).
 
     A contact can form only between such a pair (every contact is a neighbour pair: it breaks before its centres
     are 2 r1 + delta_c apart, inside the list's cutoff), so a step needs to test only these for touching instead of
