@@ -369,25 +369,17 @@ def _run_blocks(fn, names, cols, chunk, progress, edges, workers=1):
         from tqdm.auto import tqdm
         bar = tqdm(total=n, desc=progress if isinstance(progress, str) else "sweep", unit="member",
                    dynamic_ncols=True)
+    ex = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="jaxcoag-sweep") if workers > 1 else None
     try:
-        if workers == 1:
-            parts = []
-            for b in blocks:
-                parts.append(run(b))
-                if bar is not None:
-                    bar.update(b[0])
-        else:
-            ex = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="jaxcoag-sweep")
-            try:
-                futs = [ex.submit(run, b) for b in blocks]
-                for f, b in zip(futs, blocks):
-                    f.result()
-                    if bar is not None:
-                        bar.update(b[0])
-                parts = [f.result() for f in futs]
-            finally:   # Ctrl-C or a failed block: blocks not yet started are dropped
-                ex.shutdown(wait=True, cancel_futures=True)
-    finally:
+        futs = [ex.submit(run, b) for b in blocks] if ex is not None else None
+        parts = []
+        for i, b in enumerate(blocks):
+            parts.append(futs[i].result() if futs is not None else run(b))
+            if bar is not None:
+                bar.update(b[0])
+    finally:   # Ctrl-C or a failed block: blocks not yet started are dropped
+        if ex is not None:
+            ex.shutdown(wait=True, cancel_futures=True)
         if bar is not None:
             bar.close()
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}, meta
