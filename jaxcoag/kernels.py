@@ -50,6 +50,10 @@ class AbstractKernel(eqx.Module):
     """
 
     n_struct = 0  # number of structural parameters per particle this kernel reads (class attr)
+    #: (class attr) True where ``__call__`` is a few arithmetic operations on the linear masses (no
+    #: transcendental function) and non-decreasing in each mass: the Monte Carlo event loop then evaluates
+    #: its rate tiles in linear space whenever the state's range allows (``jaxcoag.mc.rates.rate_tile``)
+    cheap_linear = False
 
     @abc.abstractmethod
     def __call__(self, m1, m2, x1=None, x2=None):
@@ -99,6 +103,8 @@ class Constant(AbstractKernel):
 
     k0: jax.Array
 
+    cheap_linear = True
+
     def __init__(self, k0=1.0):
         self.k0 = _leaf(k0, "k0", positive=True, hint="the constant kernel value in cm^3 s^-1")
 
@@ -117,6 +123,8 @@ class Sum(AbstractKernel):
 
     b: jax.Array
 
+    cheap_linear = True
+
     def __init__(self, b=0.5):
         self.b = _leaf(b, "b", positive=True, hint="K = b (m1 + m2), b in cm^3 s^-1 g^-1")
 
@@ -134,6 +142,8 @@ class Product(AbstractKernel):
     """K = b m1 m2 (thesis Table 5.1 with b = 1; gels at t = 1/(b M1) for a monodisperse start)."""
 
     b: jax.Array
+
+    cheap_linear = True
 
     def __init__(self, b=1.0):
         self.b = _leaf(b, "b", positive=True, hint="K = b m1 m2, b in cm^3 s^-1 g^-2")

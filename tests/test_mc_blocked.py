@@ -26,14 +26,15 @@ from jaxcoag.mc.rates import log_rate_matrix, row_sums
 from jaxcoag.mc.state import MCState
 
 RUN = sys.modules["jaxcoag.mc.run"]
+RATES = sys.modules["jaxcoag.mc.rates"]
 S = 300          # capacity: with block = 32 the kernel passes use 10 blocks (last start clamped to 268),
 BLOCK = 32       # the cheap passes (4 x 32 = 128) 3 blocks (last start clamped to 172)
 
 
-def _cfg(rates="incremental"):
+def _cfg(rates="incremental", linear=True):
     return RUN._Cfg(mode="const_v", grouping=None, capacity=S, n_snap=1, n_struct=0, n_prod=1, rates=rates,
                     n_refresh=10**6, rounding="ceil", controller="species", d_max=1, d_up=1, n_bins=3, p_protect=0,
-                    weighting="mass", dedupe=True, n_rezoom=1, block=BLOCK)
+                    weighting="mass", dedupe=True, n_rezoom=1, block=BLOCK, linear_rates=linear)
 
 
 def _state(seed=0, n_live=260):
@@ -81,23 +82,41 @@ def test_blocked_refresh_equals_dense_row_sums():
     assert np.count_nonzero(np.asarray(R)) == int(st.ns)
 
 
+def _extreme(st):
+    """The state with one multiplicity of 1e300: the scale s of the row sums is then ~e^700, and the linear-space
+    factor r_a = ½ w_a e^{-s} of a row with w_a ~ 1 would be subnormal (precision lost): the event loop must take
+    the log-space tiles."""
+    live = np.flatnonzero(np.asarray(st.valid))
+    return st._replace(w=st.w.at[live[7]].set(1e300))
+
+
 @pytest.mark.slow
-def test_blocked_incremental_update_after_events_equals_refresh():
+@pytest.mark.parametrize("linear", [True, False, "extreme"])
+def test_blocked_incremental_update_after_events_equals_refresh(linear):
     """(slow: ~20 s of compile; every default Monte Carlo run goes through the same update, checked
     there against analytic solutions.) Ten executed events (random pairs, own pairs, deduplicated products, dying donors) with the
     blocked incremental update; the row sums then equal a fresh dense computation. Both ways the update takes a
     touched row's old rates are used: the scaled new rate (w_old/w_new) and the full formula (a donor that lived
-    before and after with a fractional multiplicity or a new zoom)."""
-    cfg = _cfg()
+    before and after with a fractional multiplicity or a new zoom). Both tile forms: linear space (the sum kernel's
+    default on this state) and log space; on the state of :func:`_extreme` the range guard must fall back to the
+    log-space update (bitwise; mutation-checked: with the guard forced open the R arrays differ).""" 
+    cfg = _cfg(linear=bool(linear))
     st = _state(seed=1)
+    if linear == "extreme":
+        st = _extreme(st)
     R, s = _dense(st)
     st = st._replace(R=R, s=s)
 
-    @jax.jit
-    def event(st, a, b, key):
-        st2, T, Tm, old = RUN._collide(cfg, P, st, a, b, key)
-        st2, _ = RUN._inc_update(cfg, P, old, st2, T, Tm)
-        return st2
+    def event_with(cfg):
+        @jax.jit
+        def event(st, a, b, key):
+            st2, T, Tm, old = RUN._collide(cfg, P, st, a, b, key)
+            st2, _ = RUN._inc_update(cfg, P, old, st2, T, Tm)
+            return st2
+        return event
+
+    event = event_with(cfg)
+    event_log = event_with(_cfg(linear=False)) if linear == "extreme" else None
 
     dense = jax.jit(_dense)
     live = np.flatnonzero(np.asarray(st.valid))
@@ -113,7 +132,11 @@ def test_blocked_incremental_update_after_events_equals_refresh():
         if not (v[a] and v[b]):
             continue
         w0, z0 = np.asarray(st.w), np.asarray(st.z)
+        st_in = st
         st = event(st, jnp.int32(a), jnp.int32(b), jax.random.key(k))
+        if event_log is not None:   # the range guard rejects the linear tiles: the log-space update, bitwise
+            np.testing.assert_array_equal(np.asarray(st.R), np.asarray(event_log(st_in, jnp.int32(a), jnp.int32(b),
+                                                                                 jax.random.key(k)).R))
         w1, z1, v1 = np.asarray(st.w), np.asarray(st.z), np.asarray(st.valid)
         for t in {a, b}:   # the donors: which way _inc_update took their old rates
             if v[t] and v1[t]:
@@ -128,10 +151,11 @@ def test_blocked_incremental_update_after_events_equals_refresh():
     assert kinds == {"scaled", "full formula"}, kinds
 
 
-@pytest.mark.parametrize("which", ["row", "partner"])
+@pytest.mark.parametrize("which", ["row", "partner", "partner_log"])
 def test_blocked_samplers_draw_with_the_dense_probabilities(which):
-    """200 000 draws of the two-level (block, slot) samplers; chi-square against the dense weights."""
-    cfg = _cfg()
+    """200 000 draws of the two-level (block, slot) samplers; chi-square against the dense weights (the partner
+    with the linear-space tiles, the sum kernel's default, and with the log-space tiles)."""
+    cfg = _cfg(linear=which != "partner_log")
     st = _state(seed=2, n_live=60)
     R, s = _dense(st)
     st = st._replace(R=R, s=s)
@@ -155,6 +179,59 @@ def test_blocked_samplers_draw_with_the_dense_probabilities(which):
     chi2 = np.sum((counts[keep] - exp_) ** 2 / exp_) + (counts[~keep].sum() - (p[~keep] * n).sum()) ** 2 / max(
         (p[~keep] * n).sum(), 1.0)
     assert stats.chi2.sf(chi2, keep.sum()) > 1e-6, chi2
+
+
+@pytest.mark.parametrize("kernel", [K.Constant(2.0), K.Sum(0.5), K.Product(1e-9)], ids=["constant", "sum", "product"])
+def test_linear_rate_tiles_equal_the_log_space_rates(kernel):
+    """``rates.rate_tile`` (the per-event tiles in linear space, no exp/log per entry) against exp(ln Λ' - s) of
+    the dense log-space matrix (Ormel 2008 eqs. 5.7, 5.13, 5.31) on a state with masses over 12 decades, zooms
+    0-40, fractional multiplicities and own pairs: every entry to 1e-12, zeros where the log form has zeros; the
+    range guard (``run._lin_rows``) admits every row of this state."""
+    st = _state(seed=3)
+    L = np.asarray(log_rate_matrix(kernel, st.logm, st.psi, st.w, st.z, st.valid, P["log2_feps"]))
+    rl = np.asarray(jax.nn.logsumexp(jnp.asarray(L), axis=1))
+    s = float(np.max(rl[np.isfinite(rl)]))
+    lw = RATES._safe_log_w(st.w)
+    r = jnp.exp(lw - np.log(2.0) - s)
+    d = jnp.exp(RATES.log_diag_factor(st.w, st.z) - s)
+    idx = jnp.arange(S, dtype=jnp.int32)
+    X = np.asarray(jax.jit(RATES.rate_tile, static_argnames="rounding")(
+        kernel(st.m[:, None], st.m[None, :]), idx, r, d, st.logm, st.w, st.z, st.valid, idx, st.logm, st.w, st.z,
+        st.valid, P["log2_feps"]))
+    E = np.exp(L - s)
+    assert np.all(X[E == 0] == 0) and np.count_nonzero(E) > 0.9 * int(st.ns) ** 2
+    big = E > 1e-290
+    np.testing.assert_allclose(X[big], E[big], rtol=1e-12)
+    rng_ = RUN._range(_cfg(), st)
+    ok = RUN._lin_rows(kernel, rng_, lw, st.w, st.z, st.logm, st.valid, s)[2]
+    assert bool(ok)
+
+
+def test_partner_pick_linear_and_log_space_agree_and_the_guard_falls_back():
+    """The partner sampler draws the same slots with the linear-space tiles as with the log-space ones (400
+    uniforms; the weights differ by round-off only); on a state whose range would make a linear factor subnormal
+    (:func:`_extreme`) the guard rejects the linear form and the draws are those of the log-space sampler
+    bitwise (there every row draws the w = 1e300 slot; the slow incremental-update test checks the rates of that
+    state, where the linear form loses the small rows: mutation-checked by forcing the guard)."""
+    u = np.asarray(jax.random.uniform(jax.random.key(11), (400, 2), dtype=jnp.float64))
+    for st, extreme in ((_state(seed=2), False), (_extreme(_state(seed=2)), True)):
+        R, s = _dense(st)
+        st = st._replace(R=R, s=s)
+        live = np.flatnonzero(np.asarray(st.valid))
+        rows = jnp.asarray(live[::len(live) // 20][:20], jnp.int32)
+        a = jnp.repeat(rows, 20)   # 20 rows, 20 draws each
+        draws = {}
+        for lin in (True, False):
+            cfg = _cfg(linear=lin)
+            draws[lin] = np.asarray(jax.jit(jax.vmap(
+                lambda a, u: RUN._pick_partner(cfg, P, st, a, u[0], u[1])))(a, jnp.asarray(u)))
+        np.testing.assert_array_equal(draws[True], draws[False])
+        pairs = set(zip(np.asarray(a).tolist(), draws[True].tolist()))
+        assert len(pairs) > (19 if extreme else 25)   # concentrated rows: 32 distinct pairs (20 with w = 1e300)
+        wa, za = st.w[rows], st.z[rows]
+        ok = RUN._lin_rows(P["kernel"], RUN._range(_cfg(), st), RATES._safe_log_w(wa), wa, za, st.logm[rows],
+                           st.valid[rows], jnp.log(st.R[rows]) + st.s)[2]
+        assert bool(ok) is not extreme
 
 
 @pytest.mark.slow

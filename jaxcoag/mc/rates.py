@@ -27,7 +27,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-__all__ = ["n_eps", "log_kernel_tile", "log_rate_tile", "log_rate_row", "log_rate_matrix", "row_sums", "log_particle_rates"]
+__all__ = ["n_eps", "log_kernel_tile", "log_rate_tile", "log_diag_factor", "pow2", "rate_tile", "log_rate_row", "log_rate_matrix", "row_sums", "log_particle_rates"]
 
 LN2 = 0.6931471805599453
 
@@ -125,20 +125,8 @@ def log_rate_tile(logK, ia, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, val
     lphi = jnp.minimum(0.0, jnp.minimum(jnp.where(a_low, lwa, lwa + ne_ln2), jnp.where(a_low, lw + ne_ln2, lw)))
     lphi = jnp.where(jnp.isfinite(lphi), lphi, 0.0)
     a_off = lwa + lw + (zmin + ne).astype(dt) * LN2
-    # diagonal (per a)
-    wa = w_a[:, None]
-    lg = lwa + za.astype(dt) * LN2
-    # z >= 1: w (g - 1), with g >= 2
-    gm1_pos = lg > 1e-12
-    log_gm1 = jnp.where(gm1_pos, lg + jnp.log(-jnp.expm1(-jnp.where(gm1_pos, lg, 1.0))), -jnp.inf)
-    d_grouped = lwa + log_gm1
-    wm1 = wa - 1.0
-    # z = 0 own pair: two particles leave (Δw = 2); with 1 < w < 2 the event takes the fraction
-    # phi = w/2 (all of it) at the rate ½ w (w - 1) C / phi (= (w - 1) C), see off-diagonal above
-    lphi_aa = jnp.where(wa >= 2.0, 0.0, lwa - LN2)
-    d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2 - lphi_aa, -jnp.inf)
-    # per-row values: the barrier makes XLA compute their log/expm1 once per row, not fused into every entry
-    dg = jax.lax.optimization_barrier(jnp.where(za >= 1, d_grouped, d_single))
+    # diagonal (per a); the barrier makes XLA compute its log/expm1 once per row, not fused into every entry
+    dg = jax.lax.optimization_barrier(log_diag_factor(w_a, z_a, lwa[:, 0])[:, None])
     # ln K enters once, after the selects: a select with ln K (or anything computed from it) as an operand
     # keeps XLA-CPU from vectorising the fused loop (Sum kernel, (3, 4096) tiles: 11.7 against 3.2 + 1.9 ns per
     # entry for the kernel and the rate apart). Subtracting the selected zeros keeps every value bitwise that of
@@ -146,6 +134,71 @@ def log_rate_tile(logK, ia, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, val
     on = ia[:, None] == ib[None, :]
     out = (jnp.where(on, dg, a_off) + logK) - jnp.where(on, 0.0, LN2) - jnp.where(on, 0.0, lphi)
     return out + jnp.where(valid_a[:, None] & valid_b[None, :], 0.0, -jnp.inf)
+
+
+def log_diag_factor(w_a, z_a, lw_a=None):
+    """ln(λ^G_aa / C_aa) of the own-species pairs, per row: shape (nA,), −inf where zero.
+
+    ``w_a (w_a 2^{z_a} − 1)`` for z_a ≥ 1 (in-group collapse) and ``½ w_a (w_a − 1)`` for z_a = 0
+    (species formalism), divided by the event fraction φ_aa = w_a/2 where 1 < w_a < 2 (module docstring).
+
+    References: Ormel (2008) eqs. (5.7), (5.31).
+    """
+    dt = w_a.dtype
+    lwa = _safe_log_w(w_a) if lw_a is None else lw_a
+    lg = lwa + z_a.astype(dt) * LN2
+    # z >= 1: w (g - 1), with g >= 2
+    gm1_pos = lg > 1e-12
+    log_gm1 = jnp.where(gm1_pos, lg + jnp.log(-jnp.expm1(-jnp.where(gm1_pos, lg, 1.0))), -jnp.inf)
+    d_grouped = lwa + log_gm1
+    wm1 = w_a - 1.0
+    # z = 0 own pair: two particles leave (Δw = 2); with 1 < w < 2 the event takes the fraction
+    # phi = w/2 (all of it) at the rate ½ w (w - 1) C / phi (= (w - 1) C), see off-diagonal above
+    lphi_aa = jnp.where(w_a >= 2.0, 0.0, lwa - LN2)
+    d_single = jnp.where(wm1 > 0, lwa + jnp.log(jnp.where(wm1 > 0, wm1, 1.0)) - LN2 - lphi_aa, -jnp.inf)
+    return jnp.where(z_a >= 1, d_grouped, d_single)
+
+
+def pow2(k):
+    """2^k as float64, exactly, for integer k in [-1022, 1023] (built from the exponent bits: no
+    transcendental function, and XLA-CPU vectorises it)."""
+    e = (jnp.clip(k, -1022, 1023).astype(jnp.int64) + 1023) << 52
+    return jax.lax.bitcast_convert_type(e, jnp.float64)
+
+
+def rate_tile(K, ia, r_a, d_a, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, valid_b, log2_feps, rounding="ceil"):
+    """Λ'_ab e^{−s} for the pairs of A x B in linear space, from linear kernel values: shape (nA, nB).
+
+    The same rates as ``exp(log_rate_tile(...) - s)`` (to round-off) without a logarithm or
+    exponential per entry, for kernels whose linear values are cheap (``cheap_linear``):
+
+        off the diagonal  K_ab · r_a · w_b 2^{min(z_a, z_b) + N_eps} / φ_ab,   r_a = ½ w_a e^{−s}
+        on the diagonal   K_aa · d_a,                                           d_a = e^{ln diag_a − s}
+
+    Arguments:
+        K: (nA, nB) kernel values [cm^3 s^-1] (the kernel's ``__call__`` on the linear masses).
+        ia, ib: slot indices (ia == ib marks the diagonal).
+        r_a, d_a: (nA,) the per-row factors above (computed from logs, once per row).
+        logm_*, w_*, z_*, valid_*: species arrays of A and B (logm for N_eps only).
+        log2_feps, rounding: as :func:`n_eps`.
+
+    The caller guarantees the range: every partial product r_a w_b 2^k / φ within [e^{-690}, e^{690}]
+    (the Monte Carlo loop checks bounds of the state before it takes this path; otherwise it uses
+    :func:`log_rate_tile`).
+
+    References: Ormel (2008) eqs. (5.7), (5.13), (5.31).
+    """
+    za, zb = z_a[:, None], z_b[None, :]
+    ne = n_eps(za, zb, logm_a[:, None], logm_b[None, :], log2_feps, rounding)
+    wa, wb = w_a[:, None], w_b[None, :]
+    a_low = za <= zb
+    p2ne = pow2(ne)
+    phi = jnp.minimum(1.0, jnp.minimum(jnp.where(a_low, wa, wa * p2ne), jnp.where(a_low, wb * p2ne, wb)))
+    phi = jnp.where(phi > 0, phi, 1.0)
+    off = (r_a[:, None] * wb) * pow2(jnp.minimum(za, zb) + ne) / phi
+    on = ia[:, None] == ib[None, :]
+    f = jnp.where(on, d_a[:, None], off)
+    return (f * jnp.where(valid_a[:, None] & valid_b[None, :], 1.0, 0.0)) * K
 
 
 def log_rate_row(kernel, a, logm, psi, w, z, valid, log2_feps, rounding="ceil"):

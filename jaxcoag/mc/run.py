@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import grouping as G
-from .rates import _safe_log_w, log_kernel_tile, log_rate_tile, n_eps
+from .rates import _safe_log_w, log_diag_factor, log_kernel_tile, log_rate_tile, n_eps, rate_tile
 from .state import STATUS, MCState, Snapshots
 
 __all__ = ["CapacityWarning", "min_capacity"]
@@ -80,6 +80,8 @@ class _Cfg:
     block: int = 128
     # equal-mass scheduled merge above em_merge x Ns* (None: above 0.9 S only)
     em_merge: float | None = 2.0
+    # per-event rate tiles in linear space for kernels with ``cheap_linear`` (see _lin_ok); False: log space always
+    linear_rates: bool = True
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -283,6 +285,69 @@ def _props(arrays, T):
     return logm[T], psi[T], w[T], z[T], valid[T]
 
 
+# ----------------------------------------------------------------------------- linear-space rate tiles
+
+#: Bounds of the linear-space rate tiles (natural log): every partial product r_a w_b 2^k / φ within
+#: e^{±_LIN_PART}, an entry below e^{_LIN_TOP} (the log path's exp overflows at e^709).
+_LIN_PART, _LIN_TOP = 690.0, 700.0
+
+
+class _Range(NamedTuple):
+    """Range of the valid slots of [0, hi): ln max w, ln min w, max z, max m, min m."""
+    lw_max: jax.Array
+    lw_min: jax.Array
+    z_max: jax.Array
+    m_max: jax.Array
+    m_min: jax.Array
+
+
+def _lin_kernel(cfg, p):
+    """The kernel if the rate tiles may be evaluated in linear space (static: ``cheap_linear``), else None."""
+    k = p["kernel"]
+    return k if (cfg.linear_rates and getattr(type(k), "cheap_linear", False)) else None
+
+
+def _range(cfg, st):
+    """:class:`_Range` of the state's valid slots in [0, hi) (one cheap blocked pass, no transcendental
+    function per slot)."""
+    Bc = _B(cfg, True)
+    inf = jnp.array(jnp.inf)
+
+    def body(k, start, idx, fresh, c):
+        v = _sl(st.valid, start, Bc) & fresh
+        w, m = _sl(st.w, start, Bc), _sl(st.m, start, Bc)
+        return (jnp.maximum(c[0], jnp.max(jnp.where(v, w, -inf))), jnp.minimum(c[1], jnp.min(jnp.where(v, w, inf))),
+                jnp.maximum(c[2], jnp.max(jnp.where(v, _sl(st.z, start, Bc), 0))),
+                jnp.maximum(c[3], jnp.max(jnp.where(v, m, -inf))), jnp.minimum(c[4], jnp.min(jnp.where(v, m, inf))))
+
+    wmax, wmin, zmax, mmax, mmin = _fold(cfg, st.hi, body, (-inf, inf, jnp.array(0, jnp.int32), -inf, inf),
+                                         cheap=True)
+    return _Range(jnp.log(wmax), jnp.log(wmin), zmax, mmax, mmin)
+
+
+def _lin_rows(kern, rng, lw, w, z, logm, valid, s_row):
+    """Per-row factors (r, d) of :func:`jaxcoag.mc.rates.rate_tile` for rows with ln w ``lw``, w, z, ln m and
+    the scale ``s_row`` (scalar or per row), and whether the linear tile is safe for all of them against
+    every valid column of the range ``rng`` (:class:`_Range`).
+
+    The bounds: φ >= min(1, w_a, w_min) and 2^{min(z_a, z_b) + N_eps} <= 2^{max(z_a, z_max)}, so every
+    partial product r_a w_b 2^k / φ lies in [r_a w_min, r_a w_max 2^{max z} / φ_min]; K(m_a, m_b) <=
+    K(m_a, m_max) (``cheap_linear`` kernels are non-decreasing in each mass). With the partial products
+    normal, an entry is exact to a few ulp; entries below the smallest normal number are < 1e-308 of the
+    largest row sum (the log path underflows there too)."""
+    dt = jnp.float64
+    lr = lw - LN2 - s_row
+    ld = log_diag_factor(w, z, lw) - s_row
+    zz = jnp.maximum(z, rng.z_max).astype(dt)
+    lphi = jnp.minimum(0.0, jnp.minimum(lw, rng.lw_min))
+    g_hi = lr + rng.lw_max + zz * LN2 - lphi
+    g_lo = lr + rng.lw_min
+    lk = jnp.log(kern(jnp.exp(logm), rng.m_max))
+    ok = ((g_hi < _LIN_PART) & (g_lo > -_LIN_PART) & (g_hi + lk < _LIN_TOP)
+          & ((ld == -jnp.inf) | ((ld > -_LIN_PART) & (ld + lk < _LIN_TOP))) & (rng.m_min > 0))
+    return jnp.exp(lr), jnp.exp(ld), jnp.all(ok | ~valid)
+
+
 def _pick_partner(cfg, p, st, a, u_blk, u_in):
     """Partner b of the selected row a, ∝ Λ'_{a,b} over the active prefix (blocked; the row is
     never formed over the capacity): block sums, one block, the slot within it.
@@ -305,14 +370,29 @@ def _pick_partner(cfg, p, st, a, u_blk, u_in):
                           _sl(st.valid, start, B) & fresh, p["log2_feps"], cfg.rounding)[0]
         return jnp.exp(L - s_a)
 
-    def body(k, start, idx, fresh, c):
-        return c.at[k].set(jnp.sum(wts(start, idx, fresh)))
+    def pick(wts):
+        def body(k, start, idx, fresh, c):
+            return c.at[k].set(jnp.sum(wts(start, idx, fresh)))
 
-    bs = _fold(cfg, st.hi, body, jnp.zeros((_nblocks(cfg),), jnp.float64))
-    kb = _pick(u_blk, bs).astype(jnp.int32)
-    start, idx, fresh = _block_at(cfg, kb, st.hi)
-    j = _pick(u_in, wts(start, idx, fresh))
-    return (start + j).astype(jnp.int32)
+        bs = _fold(cfg, st.hi, body, jnp.zeros((_nblocks(cfg),), jnp.float64))
+        kb = _pick(u_blk, bs).astype(jnp.int32)
+        start, idx, fresh = _block_at(cfg, kb, st.hi)
+        j = _pick(u_in, wts(start, idx, fresh))
+        return (start + j).astype(jnp.int32)
+
+    kern = _lin_kernel(cfg, p)
+    if kern is None:
+        return pick(wts)
+    # linear space where the state's range allows (the same weights to round-off, no exp/log per entry)
+    r_a, d_a, ok = _lin_rows(kern, _range(cfg, st), _safe_log_w(wa), wa, za, la, va, s_a)
+    ma = jnp.exp(la)
+
+    def wts_lin(start, idx, fresh):
+        lm, m = _sl(st.logm, start, B), _sl(st.m, start, B)
+        return rate_tile(kern(ma[:, None], m[None, :]), a1, r_a, d_a, la, wa, za, va, idx, lm, _sl(st.w, start, B),
+                         _sl(st.z, start, B), _sl(st.valid, start, B) & fresh, p["log2_feps"], cfg.rounding)[0]
+
+    return jax.lax.cond(ok, lambda: pick(wts_lin), lambda: pick(wts))
 
 
 class _Old(NamedTuple):
@@ -415,15 +495,18 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
         R = jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) + delta, start, axis=0)
         rowsum = rowsum + jnp.sum(X * f_new, axis=1)
         lmax = jnp.maximum(lmax, jnp.max(L))
-        live = vn_b & fresh
+        return (R, rowsum, lmax) + stats(vn_b & fresh, lmn_b, wn_b, zn_b, ns, lmx, l1, l2, lwn_b)
+
+    def stats(live, lmn_b, wn_b, zn_b, ns, lmx, l1, l2, lwn_b=None):   # the trigger figures of one block
         ns = ns + jnp.sum(live).astype(jnp.int32)
         if need_lmx:
             lmx = jnp.maximum(lmx, jnp.max(jnp.where(live, lmn_b, -jnp.inf)))
         if need_mp:
+            lwn_b = _safe_log_w(wn_b) if lwn_b is None else lwn_b
             lg = lwn_b + zn_b.astype(lwn_b.dtype) * LN2
             l1 = jnp.logaddexp(l1, jax.nn.logsumexp(jnp.where(live, lg + lmn_b, -jnp.inf)))
             l2 = jnp.logaddexp(l2, jax.nn.logsumexp(jnp.where(live, lg + 2.0 * lmn_b, -jnp.inf)))
-        return R, rowsum, lmax, ns, lmx, l1, l2
+        return ns, lmx, l1, l2
 
     # rows that lived before and after but are not "exact": their old rates from the full formula (pre-event
     # row values; the b side is the new state, as above), subtracted in a pass that runs only if such a row exists
@@ -437,11 +520,64 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
         delta = jnp.where(fresh, jnp.sum(jnp.exp(Lo - s_g), axis=0), 0.0)
         return jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) - delta, start, axis=0)
 
-    # (before the main pass: the later writes of the species arrays, in the duplication, then depend on every
-    # pass that reads them; this pass after the main one made XLA copy w, S slots, twice per event)
-    R = _fold(cfg, jnp.where(do & jnp.any(gen), st.hi, 0), body_old, st.R)
-    init = (R, jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0, jnp.int32), ninf, ninf, ninf)
-    R, rowsum, lmax, ns, lmx, l1, l2 = _fold(cfg, st.hi, body, init)
+    def passes(body_old, body, R, on=True, init=None):
+        # (the old-rate pass before the main pass: the later writes of the species arrays, in the duplication,
+        # then depend on every pass that reads them; this pass after the main one made XLA copy w, S slots,
+        # twice per event). ``on`` False: zero trips (R and init pass through)
+        R = _fold(cfg, jnp.where(on & do & jnp.any(gen), st.hi, 0), body_old, R)
+        if init is None:
+            init = (jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0, jnp.int32), ninf, ninf, ninf)
+        return _fold(cfg, jnp.where(on, st.hi, 0), body, (R,) + tuple(init))
+
+    kern_lin = _lin_kernel(cfg, p)
+    if kern_lin is None:
+        out = passes(body_old, body, st.R)
+    else:
+        # linear space where the state's range allows: X from rates.rate_tile (no exp/log per entry)
+        rng = _range(cfg, st)
+        r_e, d_e, ok_e = _lin_rows(kern_lin, rng, lw_e, w_e, z_e, lm_t, v_e, s)
+        r_o, d_o, ok_o = _lin_rows(kern_lin, rng, lwo_t, wo_t, zo_t, lm_t, vo_t & gen, s)
+        r_o, d_o = jnp.where(gen, r_o, 0.0), jnp.where(gen, d_o, 0.0)
+        m_t = jnp.exp(lm_t)[:, None]
+
+        def tile_lin(start, idx, fresh, r, d, w, z, v):
+            vn_b, lmn_b, mn_b = _sl(valid_n, start, B), _sl(logm_n, start, B), _sl(m_n, start, B)
+            wn_b, zn_b = _sl(w_n, start, B), _sl(z_n, start, B)
+            X = rate_tile(kern_lin(m_t, mn_b[None, :]), T, r, d, lm_t, w, z, v, idx, lmn_b, wn_b, zn_b,
+                          vn_b & fresh, l2f, cfg.rounding)
+            return X, vn_b, lmn_b, wn_b, zn_b
+
+        def body_old_lin(k, start, idx, fresh, R):
+            X = tile_lin(start, idx, fresh, r_o, d_o, wo_t, zo_t, vo_t)[0]
+            delta = jnp.where(fresh, jnp.sum(X, axis=0), 0.0)
+            return jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) - delta, start, axis=0)
+
+        def body_lin(k, start, idx, fresh, c):
+            R, rowsum, xmax, ns, lmx, l1, l2 = c
+            X, vn_b, lmn_b, wn_b, zn_b = tile_lin(start, idx, fresh, r_e, d_e, w_e, z_e, v_e)
+            delta = jnp.where(fresh & do, jnp.sum(X * f, axis=0), 0.0)
+            R = jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) + delta, start, axis=0)
+            rowsum = rowsum + jnp.sum(X * f_new, axis=1)
+            xmax = jnp.maximum(xmax, jnp.max(X))
+            return R, rowsum, xmax, ns, lmx, l1, l2
+
+        Bc = _B(cfg, True)
+
+        def body_stats(k, start, idx, fresh, c):   # the trigger figures in blocks of 4B (fewer loop trips)
+            return stats(_sl(valid_n, start, Bc) & fresh, _sl(logm_n, start, Bc), _sl(w_n, start, Bc),
+                         _sl(z_n, start, Bc), *c)
+
+        def lmax_lin(xmax):   # ln of the largest entry (only the overflow check below reads it)
+            return jnp.where(xmax > 0, jnp.log(jnp.where(xmax > 0, xmax, 1.0)) + s, -jnp.inf)
+
+        # the linear passes, then the log-space passes: one of them runs zero trips. (Not a lax.cond: XLA copied R,
+        # S slots, into and out of the cond's branches on every event.)
+        ok = ok_e & ok_o
+        R, rowsum, xmax, _, _, _, _ = passes(body_old_lin, body_lin, st.R, ok)
+        stats0 = _fold(cfg, jnp.where(ok, st.hi, 0), body_stats, (jnp.array(0, jnp.int32), ninf, ninf, ninf),
+                       cheap=True)
+        out = passes(body_old, body, R, ~ok, (rowsum, lmax_lin(xmax)) + tuple(stats0))
+    R, rowsum, lmax, ns, lmx, l1, l2 = out
     R = R.at[jnp.where(do, T, cfg.capacity)].set(rowsum, mode="drop")
 
     # round-off check over the updated slots outside T (read only), then the clamp of the round-off negatives
