@@ -15,10 +15,10 @@ Tables:
     (on CPU the engine runs the members of a vmapped batch one after another: ``mc.engine._simulate_members``).
 ``--baseline PATH`` runs the ``ns`` and ``capacity`` tables with the jaxcoag checkout at PATH (a
 subprocess with ``PYTHONPATH=PATH``, same machine, same invocation) and reports new/baseline ratios of
-events/s.
+events/s; with ``--baseline-goal`` also the goal run (ratio of wall times).
 
-    python benchmarks/mc_scaling.py [--quick] [--baseline /path/to/old/checkout] [--skip tables,goal,ensemble]
-        [--out PATH]
+    python benchmarks/mc_scaling.py [--quick] [--baseline /path/to/old/checkout [--baseline-goal]]
+        [--skip tables,goal,ensemble] [--out PATH]
 
 Writes benchmarks/results/mc_scaling[_quick].json (or ``--out``).
 """
@@ -137,13 +137,14 @@ def tables(quick, max_ns=None):
                 capacity=[timed(100, 2.0 if quick else 5.0, capacity=c) for c in caps])
 
 
-def run_baseline(path, quick, max_ns):
-    """The ``ns`` and ``capacity`` tables with the checkout at ``path`` (subprocess, PYTHONPATH)."""
+def run_baseline(path, quick, max_ns, goal=False):
+    """The ``ns`` and ``capacity`` tables (and the goal run if ``goal``) with the checkout at ``path`` (subprocess,
+    PYTHONPATH)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "rows.json")
         env = dict(os.environ, PYTHONPATH=os.path.abspath(path))
         cmd = [sys.executable, os.path.abspath(__file__), "--tables-only", out, "--baseline-max-ns", str(max_ns)] + \
-            (["--quick"] if quick else [])
+            (["--quick"] if quick else []) + (["--baseline-goal"] if goal else [])
         subprocess.run(cmd, env=env, check=True)
         with open(out) as fh:
             return json.load(fh)
@@ -158,15 +159,22 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/mc_scaling[_quick].json)")
     ap.add_argument("--baseline-max-ns", type=int, default=1000,
                     help="largest Ns* of the baseline's Ns table (the old O(capacity) engine is slow beyond)")
+    ap.add_argument("--baseline-goal", action="store_true",
+                    help="also run the goal run with the --baseline checkout (the old engine took ~400 s)")
     ap.add_argument("--tables-only", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.tables_only:
+        rows = dict(tables(args.quick, args.baseline_max_ns), jaxcoag_file=jaxcoag.__file__)
+        if args.baseline_goal:
+            rows["goal"] = [timed(2000, 20.0, const_ns=True)]
         with open(args.tables_only, "w") as fh:
-            json.dump(dict(tables(args.quick, args.baseline_max_ns), jaxcoag_file=jaxcoag.__file__), fh, default=str)
+            json.dump(rows, fh, default=str)
         return None
     skip = set(filter(None, args.skip.split(",")))
     do_tables = "tables" not in skip
-    base = run_baseline(args.baseline, args.quick, args.baseline_max_ns) if args.baseline and do_tables else None
+    base_goal = args.baseline_goal and not args.quick and "goal" not in skip
+    base = (run_baseline(args.baseline, args.quick, args.baseline_max_ns, base_goal)
+            if args.baseline and do_tables else None)
     res = dict(benchmark="mc_scaling", quick=args.quick, machine=machine_info(),
                **(tables(args.quick) if do_tables else {}))
     cols = ["ns", "t", "volume", "capacity", "events", "wall_s", "ev_per_s", "us_per_event", "compile_s", "Ns_max",
@@ -183,7 +191,12 @@ def main(argv=None):
         print_table(res["capacity"], cols, "events/s vs capacity (Ns* = 100)")
     if not args.quick and "goal" not in skip:
         res["goal"] = [timed(2000, 20.0, const_ns=True)]
-        print_table(res["goal"], cols[:-2] if base is not None else cols,
+        if base is not None and "goal" in base:
+            g, b = res["goal"][0], base["goal"][0]
+            g["baseline_ev_per_s"], g["baseline_wall_s"] = b["ev_per_s"], b["wall_s"]
+            g["speedup_vs_baseline"] = b["wall_s"] / g["wall_s"]
+        print_table(res["goal"], cols if "speedup_vs_baseline" in res["goal"][0] else
+                    [c for c in cols if c not in ("baseline_ev_per_s", "speedup_vs_baseline")],
                     "goal: Fig. 5.4a set-up (const-Ns, equal mass), Ns* = 2000 to t = 20 (issue 17: < 60 s after compile)")
     if "ensemble" not in skip:
         res["ensemble"] = [ensemble(ns=ns, tend=2.0 if args.quick else 5.0)

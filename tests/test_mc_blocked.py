@@ -207,6 +207,37 @@ def test_linear_rate_tiles_equal_the_log_space_rates(kernel):
     assert bool(ok)
 
 
+def test_range_of_the_linear_guard_and_its_bounds_after_writes():
+    """The range that the linear-tile guard reads (max/min of w and m, max z over the valid slots): the blocked
+    pass (``run._range``) and the event's row pass (``_pick_blocked`` with ``extra``) equal numpy's; after writes
+    (the slot of the largest w emptied, two new slots) ``run._range_with`` bounds the new state's exact range."""
+    cfg = _cfg()
+    st = _state(seed=4)
+    v = np.asarray(st.valid)
+    exact = lambda st: np.array([np.max(np.asarray(st.w)[np.asarray(st.valid)]),
+                                 np.min(np.asarray(st.w)[np.asarray(st.valid)]),
+                                 np.max(np.asarray(st.z)[np.asarray(st.valid)]),
+                                 np.max(np.asarray(st.m)[np.asarray(st.valid)]),
+                                 np.min(np.asarray(st.m)[np.asarray(st.valid)])], float)
+    np.testing.assert_array_equal(np.array(RUN._range(cfg, st), float), exact(st))
+    fn, init = RUN._range_block(cfg, st)
+    _, _, acc = RUN._pick_blocked(cfg, st.hi, lambda start, idx: RUN._sl(st.R, start, 128), 0.3, 0.6, (fn, init))
+    np.testing.assert_array_equal(np.array(acc, float), exact(st))
+    live = np.flatnonzero(v)
+    i_max = live[np.argmax(np.asarray(st.w)[live])]
+    free = np.flatnonzero(~v)[:2]
+    T = jnp.asarray([i_max, free[0], free[1]], jnp.int32)
+    st2 = st._replace(valid=st.valid.at[i_max].set(False).at[free].set(True), w=st.w.at[i_max].set(0.0)
+                      .at[free].set(jnp.array([20.0, 0.05])), z=st.z.at[free].set(jnp.array([45, 0], jnp.int32)),
+                      m=st.m.at[free].set(jnp.array([1e14, 1e-3])))
+    bnd = np.array(RUN._range_with(RUN._range(cfg, st), st2.valid[T], st2.w[T], st2.z[T], st2.m[T]), float)
+    ex2 = exact(st2)
+    assert bnd[0] >= ex2[0] and bnd[2] >= ex2[2] and bnd[3] >= ex2[3]
+    assert bnd[1] <= ex2[1] and bnd[4] <= ex2[4]
+    # the emptied slot held the largest w: its value stays the bound (above the new state's max)
+    assert (bnd[0], bnd[1], bnd[2], bnd[3], bnd[4]) == (exact(st)[0], 0.05, 45, 1e14, 1e-3) and bnd[0] > ex2[0]
+
+
 def test_partner_pick_linear_and_log_space_agree_and_the_guard_falls_back():
     """The partner sampler draws the same slots with the linear-space tiles as with the log-space ones (400
     uniforms; the weights differ by round-off only); on a state whose range would make a linear factor subnormal

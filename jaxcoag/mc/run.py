@@ -250,17 +250,22 @@ def _pick(u, weights):
     return jnp.minimum(idx, weights.shape[0] - 1)
 
 
-def _pick_blocked(cfg, n, wfn, u_blk, u_in):
+def _pick_blocked(cfg, n, wfn, u_blk, u_in, extra=None):
     """Sample a slot in [0, n) with probability ∝ ``wfn(start, idx)`` (non-negative block weights):
-    block sums, one block by ``u_blk``, the slot within it by ``u_in``. Returns (slot, total weight)."""
+    block sums, one block by ``u_blk``, the slot within it by ``u_in``. Returns (slot, total weight), and
+    with ``extra`` = (fn, init) also the fold of ``fn(start, fresh, acc)`` over the same blocks (one pass)."""
     def body(k, start, idx, fresh, c):
-        return c.at[k].set(jnp.sum(jnp.where(fresh, wfn(start, idx), 0.0)))
+        bs, acc = c
+        acc = acc if extra is None else extra[0](start, fresh, acc)
+        return bs.at[k].set(jnp.sum(jnp.where(fresh, wfn(start, idx), 0.0))), acc
 
-    bs = _fold(cfg, n, body, jnp.zeros((_nblocks(cfg, True),), jnp.float64), cheap=True)
+    bs, acc = _fold(cfg, n, body, (jnp.zeros((_nblocks(cfg, True),), jnp.float64),
+                                   None if extra is None else extra[1]), cheap=True)
     kb = _pick(u_blk, bs).astype(jnp.int32)
     start, idx, fresh = _block_at(cfg, kb, n, cheap=True)
     j = _pick(u_in, jnp.where(fresh, wfn(start, idx), 0.0))
-    return (start + j).astype(jnp.int32), jnp.sum(bs)
+    out = (start + j).astype(jnp.int32), jnp.sum(bs)
+    return out if extra is None else out + (acc,)
 
 
 def _first(cfg, n, pred):
@@ -288,14 +293,15 @@ def _props(arrays, T):
 # ----------------------------------------------------------------------------- linear-space rate tiles
 
 #: Bounds of the linear-space rate tiles (natural log): every partial product r_a w_b 2^k / φ within
-#: e^{±_LIN_PART}, an entry below e^{_LIN_TOP} (the log path's exp overflows at e^709).
-_LIN_PART, _LIN_TOP = 690.0, 700.0
+#: e^{±_LIN_PART}, an entry below e^{_LIN_TOP}: no overflow, and no entry reaches the e^600 above the scale that
+#: makes the incremental update ask for a refresh (``_inc_update``'s "over"), so the linear pass needs no max.
+_LIN_PART, _LIN_TOP = 690.0, 600.0
 
 
 class _Range(NamedTuple):
-    """Range of the valid slots of [0, hi): ln max w, ln min w, max z, max m, min m."""
-    lw_max: jax.Array
-    lw_min: jax.Array
+    """Range (or bounds of it) of the valid slots of [0, hi): max w, min w, max z, max m, min m."""
+    w_max: jax.Array
+    w_min: jax.Array
     z_max: jax.Array
     m_max: jax.Array
     m_min: jax.Array
@@ -307,22 +313,45 @@ def _lin_kernel(cfg, p):
     return k if (cfg.linear_rates and getattr(type(k), "cheap_linear", False)) else None
 
 
+_RANGE0 = (-jnp.inf, jnp.inf, 0, -jnp.inf, jnp.inf)   # (max w, min w, max z, max m, min m) of no slot
+
+
+def _range_acc(v, w, z, m, c):
+    """Fold the slots (valid v, w, z, m) into the accumulator (max w, min w, max z, max m, min m)."""
+    inf = jnp.inf
+    return (jnp.maximum(c[0], jnp.max(jnp.where(v, w, -inf))), jnp.minimum(c[1], jnp.min(jnp.where(v, w, inf))),
+            jnp.maximum(c[2], jnp.max(jnp.where(v, z, 0))).astype(jnp.int32),
+            jnp.maximum(c[3], jnp.max(jnp.where(v, m, -inf))), jnp.minimum(c[4], jnp.min(jnp.where(v, m, inf))))
+
+
+def _range_block(cfg, st):
+    """(fn, init) for :func:`_pick_blocked`'s ``extra``: the range of the valid slots, block by block."""
+    Bc = _B(cfg, True)
+
+    def fn(start, fresh, c):
+        return _range_acc(_sl(st.valid, start, Bc) & fresh, _sl(st.w, start, Bc), _sl(st.z, start, Bc),
+                          _sl(st.m, start, Bc), c)
+
+    return fn, tuple(jnp.asarray(x) for x in _RANGE0[:2]) + (jnp.int32(0),) + tuple(jnp.asarray(x)
+                                                                                   for x in _RANGE0[3:])
+
+
+def _to_range(acc):
+    return _Range(*acc)
+
+
 def _range(cfg, st):
     """:class:`_Range` of the state's valid slots in [0, hi) (one cheap blocked pass, no transcendental
     function per slot)."""
-    Bc = _B(cfg, True)
-    inf = jnp.array(jnp.inf)
+    fn, init = _range_block(cfg, st)
+    return _to_range(_fold(cfg, st.hi, lambda k, start, idx, fresh, c: fn(start, fresh, c), init, cheap=True))
 
-    def body(k, start, idx, fresh, c):
-        v = _sl(st.valid, start, Bc) & fresh
-        w, m = _sl(st.w, start, Bc), _sl(st.m, start, Bc)
-        return (jnp.maximum(c[0], jnp.max(jnp.where(v, w, -inf))), jnp.minimum(c[1], jnp.min(jnp.where(v, w, inf))),
-                jnp.maximum(c[2], jnp.max(jnp.where(v, _sl(st.z, start, Bc), 0))),
-                jnp.maximum(c[3], jnp.max(jnp.where(v, m, -inf))), jnp.minimum(c[4], jnp.min(jnp.where(v, m, inf))))
 
-    wmax, wmin, zmax, mmax, mmin = _fold(cfg, st.hi, body, (-inf, inf, jnp.array(0, jnp.int32), -inf, inf),
-                                         cheap=True)
-    return _Range(jnp.log(wmax), jnp.log(wmin), zmax, mmax, mmin)
+def _range_with(rng, v, w, z, m):
+    """Bounds of a state's range after an event that wrote the slots with values (v, w, z, m) (arrays), from
+    the range ``rng`` before it: the maxima and minima over the old range and the written slots (a slot that
+    died leaves the bounds as they were, still bounds)."""
+    return _to_range(_range_acc(v, w, z, m, tuple(rng)))
 
 
 def _lin_rows(kern, rng, lw, w, z, logm, valid, s_row):
@@ -339,16 +368,17 @@ def _lin_rows(kern, rng, lw, w, z, logm, valid, s_row):
     lr = lw - LN2 - s_row
     ld = log_diag_factor(w, z, lw) - s_row
     zz = jnp.maximum(z, rng.z_max).astype(dt)
-    lphi = jnp.minimum(0.0, jnp.minimum(lw, rng.lw_min))
-    g_hi = lr + rng.lw_max + zz * LN2 - lphi
-    g_lo = lr + rng.lw_min
+    lw_max, lw_min = jnp.log(rng.w_max), jnp.log(rng.w_min)
+    lphi = jnp.minimum(0.0, jnp.minimum(lw, lw_min))
+    g_hi = lr + lw_max + zz * LN2 - lphi
+    g_lo = lr + lw_min
     lk = jnp.log(kern(jnp.exp(logm), rng.m_max))
     ok = ((g_hi < _LIN_PART) & (g_lo > -_LIN_PART) & (g_hi + lk < _LIN_TOP)
           & ((ld == -jnp.inf) | ((ld > -_LIN_PART) & (ld + lk < _LIN_TOP))) & (rng.m_min > 0))
     return jnp.exp(lr), jnp.exp(ld), jnp.all(ok | ~valid)
 
 
-def _pick_partner(cfg, p, st, a, u_blk, u_in):
+def _pick_partner(cfg, p, st, a, u_blk, u_in, rng=None):
     """Partner b of the selected row a, ∝ Λ'_{a,b} over the active prefix (blocked; the row is
     never formed over the capacity): block sums, one block, the slot within it.
 
@@ -384,7 +414,8 @@ def _pick_partner(cfg, p, st, a, u_blk, u_in):
     if kern is None:
         return pick(wts)
     # linear space where the state's range allows (the same weights to round-off, no exp/log per entry)
-    r_a, d_a, ok = _lin_rows(kern, _range(cfg, st), _safe_log_w(wa), wa, za, la, va, s_a)
+    rng = _range(cfg, st) if rng is None else rng
+    r_a, d_a, ok = _lin_rows(kern, rng, _safe_log_w(wa), wa, za, la, va, s_a)
     ma = jnp.exp(la)
 
     def wts_lin(start, idx, fresh):
@@ -413,7 +444,7 @@ def _patch(x_b, idx, slots, values):
     return x_b
 
 
-def _inc_update(cfg, p, old, st, T, Tmask, do=True):
+def _inc_update(cfg, p, old, st, T, Tmask, do=True, rng=None):
     """Incremental row-sum update for the touched slots T (rate design B, docs/design_notes.md).
 
     One blocked pass over the active prefix [0, hi). For every touched slot t and every slot b it
@@ -533,8 +564,10 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     if kern_lin is None:
         out = passes(body_old, body, st.R)
     else:
-        # linear space where the state's range allows: X from rates.rate_tile (no exp/log per entry)
-        rng = _range(cfg, st)
+        # linear space where the state's range allows: X from rates.rate_tile (no exp/log per entry). The range
+        # of the new state: bounds from the pre-event range (the event's row pass) and the written slots
+        rng = (_range(cfg, st) if rng is None else
+               _range_with(rng, vn_t, wn_t, zn_t, jnp.where(vn_t, m_n[T], 1.0)))
         r_e, d_e, ok_e = _lin_rows(kern_lin, rng, lw_e, w_e, z_e, lm_t, v_e, s)
         r_o, d_o, ok_o = _lin_rows(kern_lin, rng, lwo_t, wo_t, zo_t, lm_t, vo_t & gen, s)
         r_o, d_o = jnp.where(gen, r_o, 0.0), jnp.where(gen, d_o, 0.0)
@@ -552,31 +585,21 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
             delta = jnp.where(fresh, jnp.sum(X, axis=0), 0.0)
             return jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) - delta, start, axis=0)
 
-        def body_lin(k, start, idx, fresh, c):
-            R, rowsum, xmax, ns, lmx, l1, l2 = c
+        def body_lin(k, start, idx, fresh, c):   # (the trigger figures and lmax: passed through, see below)
+            R, rowsum, lmax, ns, lmx, l1, l2 = c
             X, vn_b, lmn_b, wn_b, zn_b = tile_lin(start, idx, fresh, r_e, d_e, w_e, z_e, v_e)
             delta = jnp.where(fresh & do, jnp.sum(X * f, axis=0), 0.0)
             R = jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) + delta, start, axis=0)
             rowsum = rowsum + jnp.sum(X * f_new, axis=1)
-            xmax = jnp.maximum(xmax, jnp.max(X))
-            return R, rowsum, xmax, ns, lmx, l1, l2
-
-        Bc = _B(cfg, True)
-
-        def body_stats(k, start, idx, fresh, c):   # the trigger figures in blocks of 4B (fewer loop trips)
-            return stats(_sl(valid_n, start, Bc) & fresh, _sl(logm_n, start, Bc), _sl(w_n, start, Bc),
-                         _sl(z_n, start, Bc), *c)
-
-        def lmax_lin(xmax):   # ln of the largest entry (only the overflow check below reads it)
-            return jnp.where(xmax > 0, jnp.log(jnp.where(xmax > 0, xmax, 1.0)) + s, -jnp.inf)
+            return R, rowsum, lmax, ns, lmx, l1, l2
 
         # the linear passes, then the log-space passes: one of them runs zero trips. (Not a lax.cond: XLA copied R,
-        # S slots, into and out of the cond's branches on every event.)
+        # S slots, into and out of the cond's branches on every event.) The linear path's trigger figures come
+        # from the round-off check's pass below; its lmax stays -inf: the guard keeps every linear entry below
+        # e^{s + _LIN_TOP}, under the "over" threshold
         ok = ok_e & ok_o
-        R, rowsum, xmax, _, _, _, _ = passes(body_old_lin, body_lin, st.R, ok)
-        stats0 = _fold(cfg, jnp.where(ok, st.hi, 0), body_stats, (jnp.array(0, jnp.int32), ninf, ninf, ninf),
-                       cheap=True)
-        out = passes(body_old, body, R, ~ok, (rowsum, lmax_lin(xmax)) + tuple(stats0))
+        R, rowsum, _, _, _, _, _ = passes(body_old_lin, body_lin, st.R, ok)
+        out = passes(body_old, body, R, ~ok, (rowsum, ninf, jnp.array(0, jnp.int32), ninf, ninf, ninf))
     R, rowsum, lmax, ns, lmx, l1, l2 = out
     R = R.at[jnp.where(do, T, cfg.capacity)].set(rowsum, mode="drop")
 
@@ -587,13 +610,19 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True):
     Bc = _B(cfg, True)
 
     def check(k, start, idx, fresh, c):
-        tot, rmin = c
+        tot, rmin, sts = c
         Rb = _sl(R, start, Bc)
         chk = fresh & ~jnp.any(idx[:, None] == T[None, :], axis=1)
+        if sts is not None:   # linear-space tiles: the trigger figures here, in blocks of 4B (fewer loop trips)
+            sts = stats(_sl(valid_n, start, Bc) & fresh, _sl(logm_n, start, Bc), _sl(w_n, start, Bc),
+                        _sl(z_n, start, Bc), *sts)
         return (tot + jnp.sum(jnp.where(chk & jnp.isfinite(Rb), jnp.abs(Rb), 0.0)),
-                jnp.minimum(rmin, jnp.min(jnp.where(chk, Rb, jnp.inf))))
+                jnp.minimum(rmin, jnp.min(jnp.where(chk, Rb, jnp.inf))), sts)
 
-    tot, rmin = _fold(cfg, st.hi, check, (jnp.array(0.0), jnp.array(jnp.inf)), cheap=True)
+    sts0 = None if kern_lin is None else (jnp.array(0, jnp.int32), ninf, ninf, ninf)
+    tot, rmin, sts = _fold(cfg, st.hi, check, (jnp.array(0.0), jnp.array(jnp.inf), sts0), cheap=True)
+    if sts is not None:
+        ns, lmx, l1, l2 = (jnp.where(ok, a_, b_) for a_, b_ in zip(sts, (ns, lmx, l1, l2)))
 
     def clamp(k, start, idx, fresh, R):
         Rb = _sl(R, start, Bc)
@@ -937,7 +966,11 @@ def _event(cfg, p, st):
     # (Δt, row block, row slot, partner block, partner slot, duplication block, duplication slot)
     u = jax.random.uniform(ku, (7,), dtype=st.w.dtype)
     Bc = _B(cfg, True)
-    a, total = _pick_blocked(cfg, st.hi, lambda start, idx: _sl(st.R, start, Bc), u[1], u[2])
+    lin = _lin_kernel(cfg, p) is not None
+    # (with linear-space tiles the row pass also takes the range of the state that their guard reads)
+    a, total, *racc = _pick_blocked(cfg, st.hi, lambda start, idx: _sl(st.R, start, Bc), u[1], u[2],
+                                    _range_block(cfg, st) if lin else None)
+    rng = _to_range(racc[0]) if lin else None
     fresh = st.n_since_refresh == 0
     nonfinite = ~jnp.isfinite(total)
     zero = ~nonfinite & ((total <= 0) | (st.ns == 0))
@@ -959,9 +992,9 @@ def _event(cfg, p, st):
     do = proceed & ~finished
 
     def go(st, do):   # the event; its writes masked by do (out-of-range scatter indices, zero rate deltas)
-        b = _pick_partner(cfg, p, st, a, u[3], u[4])
+        b = _pick_partner(cfg, p, st, a, u[3], u[4], rng)
         st2, T, Tm, old = _collide(cfg, p, st, a, b, kout, do)
-        st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm, do)
+        st2, (lmx, l1, l2) = _inc_update(cfg, p, old, st2, T, Tm, do, rng)
         st2 = st2._replace(t=t_new, n_events=st2.n_events + 1, n_since_refresh=st2.n_since_refresh + 1)
         need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
         log_mp = l2 - l1 if need_mp else jnp.array(0.0)   # ln m_p = ln(M2/M1), read by const-Ns / rezoom
