@@ -2,8 +2,8 @@
 capacity, a baseline revision run side by side, the issue-17 goal run and a vmapped seed ensemble.
 
 Box: sum kernel K = (m1 + m2)/2, constant volume, equal-mass grouping, N = 1e30 monomers of 1 g,
-f_eps = 1e-3; the goal run uses the thesis' Fig. 5.4a set-up (constant Ns, n_particles = Ns*). Every configuration is timed on its
-second call (the first compiles; its wall time is reported apart as ``compile_s``).
+f_eps = 1e-3; the goal run uses the thesis' Fig. 5.4a set-up (constant Ns, n_particles = Ns*). Every configuration is timed after
+a first call that compiles (reported apart as ``compile_s``; short runs: the best of up to 3 timed calls).
 
 Tables:
   * ``ns``: events/s vs Ns* at the default capacity (4 Ns*), to t = 5, with the species count at 11
@@ -55,7 +55,8 @@ def _status(r):
 
 def timed(ns, tend, capacity=None, seed=1, n_out=11, const_ns=False):
     """One configuration: a compile call (key 0, the output times scaled by 1e-6: the same program, no events;
-    ``compile_s``), then the timed call (key ``seed``). ``const_ns``: the thesis Fig. 5.4a set-up (constant Ns,
+    ``compile_s``), then the timed call (key ``seed``; calls under 2 s together are repeated up to 3 times and
+    the fastest is reported, ``timed_calls``). ``const_ns``: the thesis Fig. 5.4a set-up (constant Ns,
     mass controller, n_particles = Ns*; m_p grows as e^t)."""
     vol = mc.ConstantSpecies() if const_ns else mc.ConstantVolume()
     engine = jaxcoag.MonteCarlo(grouping=mc.EqualMass(), volume=vol, n_particles=float(ns) if const_ns else 1e30,
@@ -67,13 +68,17 @@ def timed(ns, tend, capacity=None, seed=1, n_out=11, const_ns=False):
     r = run(jax.random.key(0), t_out * 1e-6)
     jax.block_until_ready(r.m)
     tc = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    r = run(jax.random.key(seed), t_out)
-    jax.block_until_ready(r.m)
-    tw = time.perf_counter() - t0
+    times = []
+    while len(times) < 3 and sum(times) < 2.0:   # short calls: the best of up to 3 (single calls varied by ~50 %)
+        t0 = time.perf_counter()
+        r = run(jax.random.key(seed), t_out)
+        jax.block_until_ready(r.m)
+        times.append(time.perf_counter() - t0)
+    tw = min(times)
     ev = int(r.n_events)
     nsp = np.asarray(r.n_species)
-    return dict(ns=ns, t=tend, volume="const_ns" if const_ns else "const_v", capacity=int(r.m.shape[-1]), compile_s=tc, wall_s=tw, events=ev, ev_per_s=ev / tw,
+    return dict(ns=ns, t=tend, volume="const_ns" if const_ns else "const_v", capacity=int(r.m.shape[-1]), compile_s=tc,
+                wall_s=tw, timed_calls=len(times), events=ev, ev_per_s=ev / tw,
                 us_per_event=1e6 * tw / max(ev, 1), status=_status(r), Ns_end=int(nsp[-1]), Ns_max=int(nsp.max()),
                 Ns_max_over_target=float(nsp.max()) / ns, merges=int(r.n_merge))
 

@@ -72,14 +72,27 @@ def _dense(st):
     return row_sums(L)
 
 
-def test_blocked_refresh_equals_dense_row_sums():
-    st = _state()
-    R, s = jax.jit(lambda st: RUN._refresh(_cfg(), P, st))(st)
+@pytest.mark.parametrize("scale", [0.0, 30.0])
+def test_blocked_refresh_equals_dense_row_sums(scale):
+    """The blocked refresh (upper triangle of tiles) against the dense row sums, with its linear-space tiles
+    (the sum kernel's default; they are scaled by the previous scale ``st.s``, here 0 and 30) and with the log-space
+    tiles; on the state of :func:`_extreme` the linear form is refused and the result is the log-space one
+    bitwise."""
+    st = _state()._replace(s=jnp.array(scale))
     Rd, sd = jax.jit(_dense)(st)
-    assert float(s) == pytest.approx(float(sd), rel=1e-14, abs=1e-12)
-    np.testing.assert_allclose(np.asarray(R), np.asarray(Rd), rtol=1e-12, atol=1e-300)
-    assert np.all(np.asarray(R)[~np.asarray(st.valid)] == 0.0)
-    assert np.count_nonzero(np.asarray(R)) == int(st.ns)
+    out = {}
+    for lin in (True, False):
+        R, s = out[lin] = jax.jit(lambda st: RUN._refresh(_cfg(linear=lin), P, st))(st)
+        assert float(s) == pytest.approx(float(sd), rel=1e-14, abs=1e-12)
+        np.testing.assert_allclose(np.asarray(R), np.asarray(Rd), rtol=1e-12, atol=1e-300)
+        assert np.all(np.asarray(R)[~np.asarray(st.valid)] == 0.0)
+        assert np.count_nonzero(np.asarray(R)) == int(st.ns)
+    assert not np.array_equal(np.asarray(out[True][0]), np.asarray(out[False][0]))   # two ways to the same sums
+    ext = _extreme(st)
+    Rl, sl = jax.jit(lambda st: RUN._refresh(_cfg(linear=True), P, st))(ext)
+    Rg, sg = jax.jit(lambda st: RUN._refresh(_cfg(linear=False), P, st))(ext)
+    np.testing.assert_array_equal(np.asarray(Rl), np.asarray(Rg))
+    assert float(sl) == float(sg)
 
 
 def _extreme(st):

@@ -1062,9 +1062,11 @@ def _tiles(cfg, p, st, row_fn):
     return _fold(cfg, st.hi, row_body, jnp.full((S,), -jnp.inf))
 
 
-def _tiles_sym(cfg, st, tile_fn):
+def _tiles_sym(cfg, st, tile_fn, linear=False, extra=None, on=True):
     """Blocked pass over the pairs of the active prefix for a *symmetric* matrix: ``tile_fn(rows, cols) -> (B, B)``
-    ln-entries (−inf outside); returns the (S,) ln row sums (−inf outside the prefix).
+    ln-entries (−inf outside); returns the (S,) ln row sums (−inf outside the prefix). With ``linear``: linear
+    entries (0 outside) and linear row sums (0 outside); ``extra``: more (S,) arrays sliced into the blocks;
+    ``on`` False: no tile (zero trips).
 
     Only the column blocks kc >= kr of row block kr are evaluated: a diagonal tile adds its row sums to its
     rows, an off-diagonal tile its row sums to its rows and its column sums to its columns (entry (a, b) is
@@ -1075,11 +1077,16 @@ def _tiles_sym(cfg, st, tile_fn):
     B, S = _B(cfg), cfg.capacity
     lw = _safe_log_w(st.w)
     n = jnp.asarray(st.hi, jnp.int32)
-    nb = (n + (B - 1)) // B
+    nb = jnp.where(on, (n + (B - 1)) // B, 0)
+    zero = 0.0 if linear else -jnp.inf
+    add = jnp.add if linear else jnp.logaddexp
+    red = jnp.sum if linear else jax.nn.logsumexp
 
     def blk(k):
         start, idx, fresh = _block_at(cfg, k, n)
-        return start, fresh, _species_block(st, lw, B, start, idx, fresh)
+        d = _species_block(st, lw, B, start, idx, fresh)
+        d.update({key: _sl(x, start, B) for key, x in (extra or {}).items()})
+        return start, fresh, d
 
     def row_body(kr, out):
         rstart, rfresh, rows = blk(kr)
@@ -1088,23 +1095,24 @@ def _tiles_sym(cfg, st, tile_fn):
             acc, out = c
             cstart, _, cols = blk(kc)
             L = tile_fn(rows, cols)
-            acc = jnp.logaddexp(acc, jax.nn.logsumexp(L, axis=1))
-            colsum = jnp.where(kc > kr, jax.nn.logsumexp(L, axis=0), -jnp.inf)
-            out = jax.lax.dynamic_update_slice_in_dim(out, jnp.logaddexp(_sl(out, cstart, B), colsum), cstart, axis=0)
+            acc = add(acc, red(L, axis=1))
+            colsum = jnp.where(kc > kr, red(L, axis=0), zero)
+            out = jax.lax.dynamic_update_slice_in_dim(out, add(_sl(out, cstart, B), colsum), cstart, axis=0)
             return acc, out
 
-        acc, out = jax.lax.fori_loop(kr, nb, col_body, (jnp.full((B,), -jnp.inf), out))
+        acc, out = jax.lax.fori_loop(kr, nb, col_body, (jnp.full((B,), zero), out))
         cur = _sl(out, rstart, B)
-        return jax.lax.dynamic_update_slice_in_dim(out, jnp.where(rfresh, jnp.logaddexp(cur, acc), cur), rstart,
-                                                   axis=0)
+        return jax.lax.dynamic_update_slice_in_dim(out, jnp.where(rfresh, add(cur, acc), cur), rstart, axis=0)
 
-    return jax.lax.fori_loop(jnp.int32(0), nb, row_body, jnp.full((S,), -jnp.inf))
+    return jax.lax.fori_loop(jnp.int32(0), nb, row_body, jnp.full((S,), zero))
 
 
 def _refresh(cfg, p, st):
     """Full recomputation of the scaled row sums (R, s) of Λ' over the active prefix (O(hi^2), blocked, the
     upper triangle of tiles only: Λ' is symmetric; the scale keeps the largest row sum at 1, rows below
-    exp(s - 745) underflow to 0).
+    exp(s - 745) underflow to 0). For ``cheap_linear`` kernels the tiles are linear (``rates.rate_tile``, scaled
+    by the previous s) where the range guard of :func:`_lin_rows` admits every row and the largest sum is
+    within e^(+-600), else in log space.
 
     References: Ormel (2008) eq. (5.31); MC hazard 5 in docs/design_notes.md."""
     def tile_fn(r, c):
@@ -1112,13 +1120,29 @@ def _refresh(cfg, p, st):
         return log_rate_tile(logK, r["i"], r["logm"], r["w"], r["z"], r["valid"], c["i"], c["logm"], c["w"], c["z"],
                              c["valid"], p["log2_feps"], cfg.rounding, lw_a=r["lw"], lw_b=c["lw"])
 
-    rlog = _tiles_sym(cfg, st, tile_fn)
-    rlog = jnp.where(jnp.isnan(rlog), jnp.nan, rlog)
-    s = jnp.max(jnp.where(jnp.isfinite(rlog) | jnp.isnan(rlog), rlog, -jnp.inf))
-    s = jnp.where(jnp.isfinite(s), s, 0.0)
-    R = jnp.exp(rlog - s)
-    R = jnp.where(jnp.isnan(rlog) | (rlog == jnp.inf), jnp.nan, R)
-    return R, s
+    def log_space():
+        rlog = _tiles_sym(cfg, st, tile_fn)
+        rlog = jnp.where(jnp.isnan(rlog), jnp.nan, rlog)
+        s = jnp.max(jnp.where(jnp.isfinite(rlog) | jnp.isnan(rlog), rlog, -jnp.inf))
+        s = jnp.where(jnp.isfinite(s), s, 0.0)
+        R = jnp.exp(rlog - s)
+        R = jnp.where(jnp.isnan(rlog) | (rlog == jnp.inf), jnp.nan, R)
+        return R, s
+
+    kern = _lin_kernel(cfg, p)
+    if kern is None:
+        return log_space()
+    s0 = st.s
+    r, d, ok = _lin_rows(kern, _range(cfg, st), _safe_log_w(st.w), st.w, st.z, st.logm, st.valid, s0)
+
+    def tile_lin(a, b):
+        return rate_tile(kern(a["m"][:, None], b["m"][None, :]), a["i"], a["r"], a["d"], a["logm"], a["w"], a["z"],
+                         a["valid"], b["i"], b["logm"], b["w"], b["z"], b["valid"], p["log2_feps"], cfg.rounding)
+
+    R = _tiles_sym(cfg, st, tile_lin, linear=True, extra=dict(m=st.m, r=r, d=d), on=ok)
+    mx = jnp.max(jnp.where(st.valid, R, 0.0))
+    ok = ok & (mx > math.exp(-600.0)) & (mx < math.exp(600.0))
+    return jax.lax.cond(ok, lambda: (R / jnp.where(ok, mx, 1.0), s0 + jnp.log(jnp.where(ok, mx, 1.0))), log_space)
 
 
 def _particle_rates(cfg, p, st):
