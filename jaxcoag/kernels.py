@@ -9,7 +9,9 @@ type (structure). Every kernel evaluates vectorised on broadcasting pairs:
     K.matrix(m)            # the N x N matrix on a vector of masses
 
 Kernels with structural parameters (porosity, ...) accept optional per-particle arrays
-``x1, x2`` with a trailing axis of length ``n_struct``; analytic kernels ignore them.
+``x1, x2`` with a trailing axis of length ``n_struct``; analytic kernels ignore them. The
+analytic kernels set ``cheap_linear``: the Monte Carlo engine then evaluates its rate tiles
+on the linear masses (``jaxcoag.mc.rates.rate_tile``) where the state's range allows.
 
 References: Ormel (2008) thesis Table 5.1 (constant, sum, product); log kernels
 (MC rates in log space, docs/design_notes.md); Smoluchowski (1916), Golovin (1963), Trubnikov (1971).
