@@ -9,6 +9,9 @@ with (eq. 5.31 and the z = 0 correction of eq. 5.10b; errata in docs/design_note
 
 with C = K/V. Everything is evaluated as logs (w up to 1e160, 2^z up to 2^1000, kernels
 spanning hundreds of decades): no product m1*m2, g_a*g_b or 2^z_a*2^z_b is ever formed.
+The event loop's fast path, :func:`rate_tile`, evaluates the same rates in linear space for the
+analytic kernels (``cheap_linear``) where a guard on the state's range (``run._lin_rows``) shows
+that every partial product stays within e^(±690); elsewhere it uses the log form.
 
 Fractional multiplicities [own]: fragment counts are real numbers, so a z = 0 species may hold
 0 < w < 1 (or 1 < w < 2 for its own pairs), less than one event removes (Δw_i = 1 from the
