@@ -2,8 +2,9 @@
 capacity, a baseline revision run side by side, the issue-17 goal run and a vmapped seed ensemble.
 
 Box: sum kernel K = (m1 + m2)/2, constant volume, equal-mass grouping, N = 1e30 monomers of 1 g,
-f_eps = 1e-3; the goal run uses the thesis' Fig. 5.4a set-up (constant Ns, n_particles = Ns*). Every configuration is timed after
-a first call that compiles (reported apart as ``compile_s``; short runs: the best of up to 3 timed calls).
+f_eps = 1e-3; the goal run uses the thesis' Fig. 5.4a set-up (constant Ns, n_particles = Ns*). Every configuration
+is timed after a first call that compiles (reported apart as ``compile_s``; short runs: the best of up to 3 timed
+calls).
 
 Tables:
   * ``ns``: events/s vs Ns* at the default capacity (4 Ns*), to t = 5, with the species count at 11

@@ -30,7 +30,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-__all__ = ["n_eps", "log_kernel_tile", "log_rate_tile", "log_diag_factor", "pow2", "rate_tile", "log_rate_row", "log_rate_matrix", "row_sums", "log_particle_rates"]
+__all__ = ["n_eps", "log_kernel_tile", "log_rate_tile", "log_diag_factor", "pow2", "rate_tile", "log_rate_row",
+           "log_rate_matrix", "row_sums", "log_particle_rates"]
 
 LN2 = 0.6931471805599453
 

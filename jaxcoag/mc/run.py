@@ -80,7 +80,7 @@ class _Cfg:
     block: int = 128
     # equal-mass scheduled merge above em_merge x Ns* (None: above 0.9 S only)
     em_merge: float | None = 2.0
-    # per-event rate tiles in linear space for kernels with ``cheap_linear`` (see _lin_ok); False: log space always
+    # per-event rate tiles in linear space for kernels with ``cheap_linear`` (see _lin_rows); False: log space always
     linear_rates: bool = True
 
 
@@ -313,9 +313,6 @@ def _lin_kernel(cfg, p):
     return k if (cfg.linear_rates and getattr(type(k), "cheap_linear", False)) else None
 
 
-_RANGE0 = (-jnp.inf, jnp.inf, 0, -jnp.inf, jnp.inf)   # (max w, min w, max z, max m, min m) of no slot
-
-
 def _range_acc(v, w, z, m, c):
     """Fold the slots (valid v, w, z, m) into the accumulator (max w, min w, max z, max m, min m)."""
     inf = jnp.inf
@@ -332,26 +329,22 @@ def _range_block(cfg, st):
         return _range_acc(_sl(st.valid, start, Bc) & fresh, _sl(st.w, start, Bc), _sl(st.z, start, Bc),
                           _sl(st.m, start, Bc), c)
 
-    return fn, tuple(jnp.asarray(x) for x in _RANGE0[:2]) + (jnp.int32(0),) + tuple(jnp.asarray(x)
-                                                                                   for x in _RANGE0[3:])
-
-
-def _to_range(acc):
-    return _Range(*acc)
+    inf = jnp.array(jnp.inf)
+    return fn, (-inf, inf, jnp.int32(0), -inf, inf)   # the range of no slot
 
 
 def _range(cfg, st):
     """:class:`_Range` of the state's valid slots in [0, hi) (one cheap blocked pass, no transcendental
     function per slot)."""
     fn, init = _range_block(cfg, st)
-    return _to_range(_fold(cfg, st.hi, lambda k, start, idx, fresh, c: fn(start, fresh, c), init, cheap=True))
+    return _Range(*_fold(cfg, st.hi, lambda k, start, idx, fresh, c: fn(start, fresh, c), init, cheap=True))
 
 
 def _range_with(rng, v, w, z, m):
     """Bounds of a state's range after an event that wrote the slots with values (v, w, z, m) (arrays), from
     the range ``rng`` before it: the maxima and minima over the old range and the written slots (a slot that
     died leaves the bounds as they were, still bounds)."""
-    return _to_range(_range_acc(v, w, z, m, tuple(rng)))
+    return _Range(*_range_acc(v, w, z, m, tuple(rng)))
 
 
 def _lin_rows(kern, rng, lw, w, z, logm, valid, s_row):
@@ -970,7 +963,7 @@ def _event(cfg, p, st):
     # (with linear-space tiles the row pass also takes the range of the state that their guard reads)
     a, total, *racc = _pick_blocked(cfg, st.hi, lambda start, idx: _sl(st.R, start, Bc), u[1], u[2],
                                     _range_block(cfg, st) if lin else None)
-    rng = _to_range(racc[0]) if lin else None
+    rng = _Range(*racc[0]) if lin else None
     fresh = st.n_since_refresh == 0
     nonfinite = ~jnp.isfinite(total)
     zero = ~nonfinite & ((total <= 0) | (st.ns == 0))
