@@ -569,18 +569,17 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True, rng=None):
         def tile_lin(start, idx, fresh, r, d, w, z, v):
             vn_b, lmn_b, mn_b = _sl(valid_n, start, B), _sl(logm_n, start, B), _sl(m_n, start, B)
             wn_b, zn_b = _sl(w_n, start, B), _sl(z_n, start, B)
-            X = rate_tile(kern_lin(m_t, mn_b[None, :]), T, r, d, lm_t, w, z, v, idx, lmn_b, wn_b, zn_b,
-                          vn_b & fresh, l2f, cfg.rounding)
-            return X, vn_b, lmn_b, wn_b, zn_b
+            return rate_tile(kern_lin(m_t, mn_b[None, :]), T, r, d, lm_t, w, z, v, idx, lmn_b, wn_b, zn_b,
+                             vn_b & fresh, l2f, cfg.rounding)
 
         def body_old_lin(k, start, idx, fresh, R):
-            X = tile_lin(start, idx, fresh, r_o, d_o, wo_t, zo_t, vo_t)[0]
+            X = tile_lin(start, idx, fresh, r_o, d_o, wo_t, zo_t, vo_t)
             delta = jnp.where(fresh, jnp.sum(X, axis=0), 0.0)
             return jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) - delta, start, axis=0)
 
         def body_lin(k, start, idx, fresh, c):   # (the trigger figures and lmax: passed through, see below)
             R, rowsum, lmax, ns, lmx, l1, l2 = c
-            X, vn_b, lmn_b, wn_b, zn_b = tile_lin(start, idx, fresh, r_e, d_e, w_e, z_e, v_e)
+            X = tile_lin(start, idx, fresh, r_e, d_e, w_e, z_e, v_e)
             delta = jnp.where(fresh & do, jnp.sum(X * f, axis=0), 0.0)
             R = jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) + delta, start, axis=0)
             rowsum = rowsum + jnp.sum(X * f_new, axis=1)
