@@ -66,6 +66,27 @@ def test_engine_refuses_kernel_and_bad_settings():
         rigid.box.RigidBox(eta=1.5)
     with pytest.raises(JaxcoagInputError, match="neighbors"):
         rigid.box.RigidBox(neighbors=0)
+    with pytest.raises(JaxcoagInputError, match='"body"'):
+        rigid.box.RigidBox(clock="per-body")
+
+
+def test_argmin2_and_tau_block_width():
+    """box._argmin2 (the per-body clocks' choice of the next pair check: the index of the earliest entry of a block
+    and its second smallest value, in one reduction) against numpy, with ties and infinities; box._tau_block is a
+    power of two near sqrt(P) in [128, 4096]."""
+    from jaxcoag.aggregates.rigid import box as rbox
+
+    rng = np.random.default_rng(5)
+    f = jax.jit(rbox._argmin2)
+    cases = [rng.uniform(size=512), np.full(256, np.inf), np.r_[np.full(100, np.inf), 3.0, 2.0, 2.0, np.inf],
+             np.r_[5.0, np.full(127, np.inf)], rng.integers(0, 4, 128).astype(float)]
+    for x in cases:
+        i, m2 = f(jnp.asarray(x))
+        assert int(i) == int(np.argmin(x))
+        rest = np.delete(x, int(np.argmin(x)))
+        assert float(m2) == float(np.min(rest))
+    assert [rbox._tau_block(P) for P in (1, 1000, 24_000, 240_000, 2_400_000, 10**9)] == [128, 128, 256, 512, 2048,
+                                                                                            4096]
 
 
 # ------------------------------------------------------------------------------------------------ initial state
@@ -329,10 +350,11 @@ def _min_gap(st):
 
 
 @pytest.mark.slow
-def test_fuzz_no_tunnelling_at_high_speed():
+@pytest.mark.parametrize("clock", ["body", "global"])
+def test_fuzz_no_tunnelling_at_high_speed(clock):
     """v0 = 200 box units per time: a sphere crosses its own diameter in 1e-3, the outputs are 5e-3 apart."""
     b = rigid.box_model("iii", n0=60, box=3.0, v0=200.0, key=jax.random.key(2))
-    eng = rigid.box.RigidBox()
+    eng = rigid.box.RigidBox(clock=clock)
     res = b
     gaps = []
     for k in range(1, 13):
@@ -356,13 +378,73 @@ def test_checkpoint_resume_equals_uninterrupted(tmp_path):
 
 
 @pytest.mark.slow
-def test_accelerator_block_widths_give_the_same_run(monkeypatch):
+@pytest.mark.parametrize("model", ["iii", "iv"])
+def test_body_and_global_clocks_resolve_the_same_collisions(model):
+    """The per-body clocks (each listed pair checked at its own time, bodies advanced lazily) against the global
+    conservative-advancement step, n0 = 300 to T = 0.6: the same collisions (pairs, outcomes, N(t), N_C), contact
+    times within 1e-3 (the two clocks detect a contact at different points of the band g <= tol and integrate the
+    rotations in different substeps), P, L and KE conserved per collision as the model demands, and every body's
+    clock at the output time."""
+    t = jnp.array([0.2, 0.4, 0.6])
+    runs = {}
+    for clock in ("global", "body"):
+        b = rigid.box_model(model, n0=300, box=6.0, v0=13.0, key=jax.random.key(4))
+        runs[clock] = rigid.run(b, t, engine=rigid.RigidBox(neighbors=64, cell_capacity=64, clock=clock))
+    g, bd = runs["global"].collision_log, runs["body"].collision_log
+    assert len(g["t"]) == len(bd["t"]) > 100
+    for k in ("a", "b", "outcome"):
+        np.testing.assert_array_equal(bd[k], g[k])
+    np.testing.assert_allclose(bd["t"], g["t"], rtol=0, atol=1e-3)
+    for k in ("n_aggregates", "n_c", "n_c1", "n_coag"):
+        np.testing.assert_array_equal(np.asarray(runs["body"].outs[k]), np.asarray(runs["global"].outs[k]))
+    assert np.all(bd["dP"] <= 1e-12 * bd["P_scale"]) and np.all(bd["dL"] <= 1e-10 * bd["L_scale"])
+    st = runs["body"].final_state
+    assert np.all(np.asarray(st.tb) == 0.6) and float(st.t) == 0.6
+    # the pair check times are all in the future, and the body clock used several checks per global step's worth
+    al = np.asarray(st.tau)[: int(st.n_pairs)]
+    assert np.all(al >= 0.6)
+    assert int(runs["body"].outs["n_steps"][-1]) > int(runs["global"].outs["n_steps"][-1])
+
+
+@pytest.mark.slow
+def test_body_clock_checkpoint_resume_and_clock_switch(tmp_path):
+    """Model (iv) with per-body clocks: a run resumed from its checkpoint equals the uninterrupted run bitwise (the
+    state at an output is synchronised and its pair check times stay valid), and a state advanced with the global
+    clock continues with per-body clocks (its check times are rebuilt by one scan first) without any overlap."""
+    t = jnp.array([0.2, 0.4, 0.6])
+    eng = rigid.RigidBox(neighbors=64, cell_capacity=64)
+
+    def box():
+        return rigid.box_model("iv", n0=150, box=5.0, v0=13.0, key=jax.random.key(9))
+
+    full = rigid.run(box(), t, engine=eng)
+    ck = tmp_path / "iv.npz"
+    part = rigid.run(box(), t, engine=eng, checkpoint=ck, max_segments=1)
+    assert len(part.t) == 1
+    res = rigid.run(box(), t, engine=eng, checkpoint=ck)
+    assert int(full.outs["n_c"][-1]) > 20
+    for k in ("n_aggregates", "n_c", "n_steps", "n_build"):
+        np.testing.assert_array_equal(np.asarray(res.outs[k]), np.asarray(full.outs[k]))
+    np.testing.assert_array_equal(np.asarray(res.final_state.X), np.asarray(full.final_state.X))
+    np.testing.assert_array_equal(np.asarray(res.final_state.q), np.asarray(full.final_state.q))
+    first = rigid.run(box(), t[:1], engine=rigid.RigidBox(neighbors=64, cell_capacity=64, clock="global"))
+    assert not np.isfinite(float(first.final_state.t_dsp))  # the global clock leaves no valid check times
+    cont = rigid.run(first, t[1:], engine=eng)
+    assert int(cont.outs["n_c"][-1]) > int(first.outs["n_c"][-1])
+    assert _min_gap(cont.final_state) >= -1e-6 * 0.1 - 1e-12
+    log = cont.collision_log
+    assert np.all(log["dP"] <= 1e-12 * log["P_scale"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("clock", ["body", "global"])
+def test_accelerator_block_widths_give_the_same_run(monkeypatch, clock):
     """The widths a GPU gets from box._lanes (pair build and pair scan 2^20, rotation chunks 16 384: one block
     each) against narrow ones (32, 32, 2: many blocks in every pass of this small box), both on the CPU: the same
     collisions, steps and final state (per-body rotation and the pair order do not depend on the blocking)."""
     from jaxcoag.aggregates.rigid import box as rbox
 
-    eng = rigid.RigidBox(neighbors=64, cell_capacity=64)
+    eng = rigid.RigidBox(neighbors=64, cell_capacity=64, clock=clock)
     t = jnp.linspace(0.2, 1.0, 5)
 
     def go():

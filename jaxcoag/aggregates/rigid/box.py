@@ -17,24 +17,37 @@ point (R8-R12); (iv), (v) aggregates stick when the impact energy ``E_imp = ½ �
 ``E_thr`` (the initial mean kinetic energy per particle) and bounce otherwise, with the normal coefficient
 of restitution of Bridges et al. (1984) (R13-R28). Model (v) has 9000 spheres of radius 0.033.
 
-Numerical scheme (one synchronized global time; all arrays have the fixed capacity ``n0``):
+Numerical scheme (all arrays have the fixed capacity ``n0``):
 
 * Models (i), (ii): exact event-driven dynamics. Every sphere keeps the time and partner of its earliest
   predicted impact over its neighbour list (exact quadratic time of impact, R1's
   :func:`~jaxcoag.aggregates.rigid.body.sphere_toi`); the loop jumps to the earliest of (next impact,
   next neighbour-list rebuild, next output time), so a collision costs O(K²) (the rows of the two
   colliders and of their neighbours) plus O(n0) for the global move, independent of the pair count.
-* Models (iii)-(v): conservative advancement at sphere level (spec A4): gaps ``g`` and rates ``ġ`` of
-  all neighbour pairs of spheres in different aggregates, the acceleration bound
-  ``A = 2(Ω_a² R_max,a + Ω_b² R_max,b)`` of torque-free rotation, the global step
-  ``dt = η min t*`` with t* from :func:`~jaxcoag.aggregates.rigid.body.safe_time` for the gap ``g − tol/2``
-  (η = 1 by default), so no gap closes below tol/2 within a step (no tunnelling at any speed) and a pair
-  approaching at a nearly constant rate reaches the event band in one step; a pair with ``g <= tol`` and
-  ``ġ < 0`` is an event and is resolved alone (coagulation by :func:`~jaxcoag.aggregates.rigid.body.merge`,
-  restitution by :func:`~jaxcoag.aggregates.rigid.body.restitute`). Rotation uses the symmetric splitting
-  integrator of :func:`~jaxcoag.aggregates.rigid.body.rotate_free` with ``|ω| h <= 0.02`` per body
-  (:func:`~jaxcoag.aggregates.rigid.body.rotate_free_batch`, the bodies needing more than half the largest
-  substep count first).
+* Models (iii)-(v): conservative advancement at sphere level (spec A4): for a neighbour pair of spheres in
+  different aggregates with gap ``g``, gap rate ``ġ`` and the acceleration bound
+  ``A = 2(Ω_a² R_max,a + Ω_b² R_max,b)`` of torque-free rotation, the gap cannot close below tol/2 within
+  ``η t*``, t* from :func:`~jaxcoag.aggregates.rigid.body.safe_time` for the gap ``g − tol/2`` (η = 1 by
+  default): no tunnelling at any speed, and a pair approaching at a nearly constant rate reaches the event
+  band in one step. A pair with ``g <= tol`` and ``ġ < 0`` is an event and is resolved alone (coagulation by
+  :func:`~jaxcoag.aggregates.rigid.body.merge`, restitution by :func:`~jaxcoag.aggregates.rigid.body.restitute`).
+  Rotation uses the symmetric splitting integrator of :func:`~jaxcoag.aggregates.rigid.body.rotate_free` with
+  ``|ω| h <= 0.02`` per body (:func:`~jaxcoag.aggregates.rigid.body.rotate_free_batch`).
+
+  - ``RigidBox(clock="body")`` (the default on a CPU), per-body clocks: each body keeps the time ``tb`` at which its
+    position and orientation hold and is moved only when one of its pairs is checked (lazy free motion);
+    each listed pair keeps its next check time ``τ = t + η t*``. The loop takes the earliest check (a
+    blocked minimum over the pairs, O(sqrt P)), brings the two bodies to that time, and either resolves the
+    contact or sets the pair's next check. A collision sets the check time of every pair of the two bodies
+    to now (their velocities and spins changed). All bodies are brought to a common time only at the output
+    times and when some sphere may have moved skin/2 since the list was built (a displacement bound
+    updated at each collision from the largest sphere speed bound ``|V| + Ω R_max``; the actual
+    displacement is then measured and the list rebuilt above 0.4 skin). A check costs O(1), a collision
+    O(members of the two aggregates + listed pairs), so the work per unit time grows about as n0 instead of
+    n0² (the global clock's step shrinks as 1/n0 and each step touches every sphere).
+  - ``RigidBox(clock="global")`` (the default on an accelerator): one step ``dt = η min t*`` over all pairs
+    for the whole box, every body advanced at every step (the bodies needing more than half the largest
+    substep count first).
 * Neighbour structure: a Verlet list with cutoff ``R_s + R_t + skin`` (pairs within one aggregate excluded),
   at most ``K`` partners per sphere, built from a uniform cell grid (cells no smaller than the cutoff; the
   27 surrounding cells are searched) in O(n0), or by an all-pairs scan when the cutoff exceeds L/3. It is
@@ -44,10 +57,10 @@ Numerical scheme (one synchronized global time; all arrays have the fixed capaci
   (n0, K) rows whose candidates are the 27 cells padded to the fullest one (2, 4, ... up to
   ``cell_capacity`` spheres per cell, a second overflow). Models (iii)-(v) build the pairs once (s < t)
   directly (:func:`_build_pairs`: candidates enumerated over the occupied cells only, no per-cell capacity)
-  and scan only the pairs in use; rotation touches only live aggregates and spinning spheres. A step
-  therefore costs O(n0) with a small constant (sphere positions, the global move, the displacement test)
-  plus O(pairs in use); the number of steps per unit time grows with n0 as well (one global time), so the
-  cost per unit simulated time grows faster than n0 (``benchmarks/rigid_scaling.py`` measures it).
+  and scan only the pairs in use; rotation touches only live aggregates and spinning spheres. With the
+  global clock a step costs O(n0) (sphere positions, the global move, the displacement test) plus O(pairs in
+  use), and the number of steps per unit time grows with n0 as well, so its cost per unit simulated time
+  grows faster than n0; ``benchmarks/rigid_scaling.py`` measures both clocks.
 * Periodic images: minimum image per sphere pair (valid because the cutoff is below L/2); contacts of an
   aggregate with its own image are not detected (spec A4.4; R95 is silent).
 
@@ -298,9 +311,15 @@ class BoxState(eqx.Module):
     ``nb`` (n0, K) (``n0`` = empty) with reference positions ``x_ref`` and radii ``r_ref`` of its build;
     models (iii)-(v) also keep its pairs s < t once, ``pair_i``/``pair_j`` (capacity n0 K / 2, the first
     ``n_pairs`` in use, in the row order of ``nb``);
-    event-driven predictions ``tc``/``partner`` and the rebuild time ``t_rebuild`` (models i-ii).
+    event-driven predictions ``tc``/``partner`` and the rebuild time ``t_rebuild`` (models i-ii; models iii-v
+    with per-body clocks: the time at which some sphere may have moved skin/2 since the build). Per-body clocks
+    (models iii-v, ``RigidBox(clock="body")``): ``tb`` the time at which each body's ``X``, ``q``, ``Pi`` hold,
+    ``tau`` the next check time of each listed pair (blocks of ``tau.size // tau_blk.size``, ``tau_blk`` their
+    minima), the displacement bound ``dsp`` of any sphere since the build at time ``t_dsp`` (``-inf``: ``tau``
+    not valid, the next run scans every pair first) and the speed bound ``vmx`` (max of ``|V| + Ω R_max``) since.
     Counters: collisions ``n_c``, first-time collisions ``n_c1``, coagulations ``n_coag``, restitutions
-    ``n_rest``, loop iterations ``n_steps``, rebuilds ``n_build``; ``nc_max`` (static) cells per box side; ``flags`` bit 0 log full, bit 1
+    ``n_rest``, loop iterations ``n_steps`` (global steps; with per-body clocks pair checks, resynchronisations
+    and outputs), rebuilds ``n_build``; ``nc_max`` (static) cells per box side; ``flags`` bit 0 log full, bit 1
     neighbour/cell overflow, bit 2 step budget spent. ``log`` holds the collision log (dict of (E,) arrays)
     and ``n_log`` its fill; ``par`` the physical parameters (dict of scalars).
     """
@@ -331,6 +350,12 @@ class BoxState(eqx.Module):
     tc: jax.Array
     partner: jax.Array
     t_rebuild: jax.Array
+    tb: jax.Array
+    tau: jax.Array
+    tau_blk: jax.Array
+    vmx: jax.Array
+    dsp: jax.Array
+    t_dsp: jax.Array
     n_c: jax.Array
     n_c1: jax.Array
     n_coag: jax.Array
@@ -372,14 +397,9 @@ def _lanes(cpu, accelerator):
     return cpu if jax.default_backend() == "cpu" else accelerator
 
 
-def _sphere_pos(st):
-    """Space positions (wrapped), unwrapped offsets A b and velocities of every sphere.
-
-    Elementwise on columns: the rotation matrix entries of :func:`~jaxcoag.aggregates.rigid.body.matrix_from_quat`
-    per slot, then one gather of the 18 slot numbers (matrix, space spin ω = A diag(1/I_k) Π as in
-    :func:`~jaxcoag.aggregates.rigid.body.omega_space`, X, V) per sphere (a batched matrix product of n tiny matrices,
-    or sums over their axes of 3, is several times slower on CPU, and this runs at every step)."""
-    q = st.q
+def _slot_table(q, Pi, Ip, X, V):
+    """Per body slot: the 9 rotation-matrix entries (row-major), the space spin ω = A diag(1/I_k) Π, X and V,
+    as an (slots, 18) array, elementwise on columns (see :func:`_sphere_pos`)."""
     nq2 = q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2] + q[:, 3] * q[:, 3]
     pos = nq2 > 0
     nq = jnp.where(pos, jnp.sqrt(jnp.where(pos, nq2, 1.0)), 0.0)
@@ -388,19 +408,56 @@ def _sphere_pos(st):
     R = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
          [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
          [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
-    v = st.Pi * body._inv_moments(st.Ip)
+    v = Pi * body._inv_moments(Ip)
     ws = [R[i][0] * v[:, 0] + R[i][1] * v[:, 1] + R[i][2] * v[:, 2] for i in range(3)]
-    slot = jnp.stack([R[i][k] for i in range(3) for k in range(3)] + ws
-                     + [st.X[:, i] for i in range(3)] + [st.V[:, i] for i in range(3)], axis=1)  # (slots, 18)
-    G = slot[st.sph_agg]
-    b = st.sph_b
+    return jnp.stack([R[i][k] for i in range(3) for k in range(3)] + ws
+                     + [X[:, i] for i in range(3)] + [V[:, i] for i in range(3)], axis=1)
+
+
+def _from_table(G, b, L):
+    """Sphere positions (wrapped), offsets A b and velocities from the gathered rows G (k, 18) of their bodies'
+    :func:`_slot_table` and their body-frame offsets b (k, 3)."""
     r = jnp.stack([G[:, 3 * i] * b[:, 0] + G[:, 3 * i + 1] * b[:, 1] + G[:, 3 * i + 2] * b[:, 2] for i in range(3)],
                   axis=1)
     wg, Xg, Vg = G[:, 9:12], G[:, 12:15], G[:, 15:18]
-    x = _wrap(Xg + r, st.par["L"])
+    x = _wrap(Xg + r, L)
     u = Vg + jnp.stack([wg[:, 1] * r[:, 2] - wg[:, 2] * r[:, 1], wg[:, 2] * r[:, 0] - wg[:, 0] * r[:, 2],
                         wg[:, 0] * r[:, 1] - wg[:, 1] * r[:, 0]], axis=1)
     return x, r, u
+
+
+def _sphere_pos(st):
+    """Space positions (wrapped), unwrapped offsets A b and velocities of every sphere.
+
+    Elementwise on columns: the rotation matrix entries of :func:`~jaxcoag.aggregates.rigid.body.matrix_from_quat`
+    per slot, then one gather of the 18 slot numbers (matrix, space spin ω = A diag(1/I_k) Π as in
+    :func:`~jaxcoag.aggregates.rigid.body.omega_space`, X, V) per sphere (a batched matrix product of n tiny matrices,
+    or sums over their axes of 3, is several times slower on CPU, and this runs at every step)."""
+    G = _slot_table(st.q, st.Pi, st.Ip, st.X, st.V)[st.sph_agg]
+    return _from_table(G, st.sph_b, st.par["L"])
+
+
+def _sphere_pos_of(st, s):
+    """:func:`_sphere_pos` of the spheres ``s`` (k,) only (their bodies' current state; the same arithmetic)."""
+    a = st.sph_agg[s]
+    G = _slot_table(st.q[a], st.Pi[a], st.Ip[a], st.X[a], st.V[a])
+    return _from_table(G, st.sph_b[s], st.par["L"])
+
+
+def _gap_rate(xi, xj, ui, uj, Ri, Rj, L):
+    """Gap g = |d| - (R_i + R_j) and gap rate ġ = d·(u_j - u_i)/|d| of sphere pairs (minimum image d)."""
+    d = _mimg(xj - xi, L)
+    dist = jnp.sqrt(_dot3(d, d))
+    g = dist - (Ri + Rj)
+    gdot = _dot3(d, uj - ui) / jnp.where(dist > 0, dist, 1.0)
+    return g, gdot
+
+
+def _tau_block(P):
+    """Width of the blocks of the per-pair check times (per-body clocks): about sqrt(P), a power of two in
+    [128, 4096], so that finding the earliest check (the minimum over the block minima, then within one block)
+    and updating it cost O(sqrt P)."""
+    return int(min(max(1 << math.ceil(math.log2(max(P, 1)) / 2), 128), 4096))
 
 
 # ------------------------------------------------------------------------------------------------ neighbours
@@ -544,8 +601,16 @@ class RigidBox(AbstractEngine):
         tol: contact gap tolerance of conservative advancement, in units of r0 (default 1e-6).
         eta: fraction of the safe time taken per step, in (0, 1] (default 1: the safe time is that to the gap
             tol/2, so a full step cannot close a gap below tol/2).
-        n_rot: maximum rotation substeps per step (|ω| h <= 0.02 per substep for each body; the step is capped
-            so that the fastest spinner needs at most n_rot).
+        n_rot: maximum rotation substeps per step of ``clock="global"`` (|ω| h <= 0.02 per substep for each body;
+            the step is capped so that the fastest spinner needs at most n_rot). With per-body clocks a body takes
+            as many substeps of |ω| h <= 0.02 as its own interval needs.
+        clock: models (iii)-(v): ``"body"``, per-body clocks, each listed pair checked at its own next check time
+            (module docstring), or ``"global"``, one conservative-advancement step for the whole box. Both resolve
+            the same contacts to the tolerance ``tol``; ``"body"`` costs O(1) per check instead of O(n0) per global
+            step, but each check is a few dozen small kernels, so on a GPU, where a global step's passes over the
+            spheres are nearly free and launches are not, the global clock is the faster one. Default ``None``:
+            ``"body"`` on a CPU, ``"global"`` on an accelerator (chosen at trace time). Models (i), (ii) are
+            event-driven either way.
     """
 
     neighbors: int = eqx.field(static=True, default=48)
@@ -556,8 +621,13 @@ class RigidBox(AbstractEngine):
     tol: float = eqx.field(static=True, default=1e-6)
     eta: float = eqx.field(static=True, default=1.0)
     n_rot: int = eqx.field(static=True, default=64)
+    clock: str | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
+        if self.clock not in (None, "body", "global"):
+            raise JaxcoagInputError(f'RigidBox(clock=...) must be "body" (per-body clocks), "global" (one step for '
+                                    f'the whole box) or None (body on a CPU, global on an accelerator); got '
+                                    f'{self.clock!r}.')
         for name in ("neighbors", "cell_capacity", "log_capacity", "max_steps", "n_rot"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
@@ -611,6 +681,8 @@ class RigidBox(AbstractEngine):
         rc = 2 * float(np.max(np.asarray(b.radius))) + float(par["skin"])
         nc_max = int(min(max(math.floor(float(b.L) / rc), 1), 64))
         npair = 1 if b.kind in _SPHERE_KINDS else max(n * self.neighbors // 2, 1)
+        tblk = _tau_block(npair)
+        nblk = -(-npair // tblk)
         st = BoxState(
             model=b.model, nc_max=nc_max, t=jnp.asarray(t0, f), alive=jnp.ones(n, bool), X=jnp.asarray(b.x, f),
             V=jnp.asarray(b.v, f), q=jnp.tile(jnp.array([1.0, 0, 0, 0], f), (n, 1)), Pi=jnp.zeros((n, 3), f),
@@ -620,6 +692,8 @@ class RigidBox(AbstractEngine):
             pair_i=jnp.zeros(npair, jnp.int32), pair_j=jnp.zeros(npair, jnp.int32), n_pairs=jnp.int32(0),
             x_ref=jnp.asarray(b.x, f), r_ref=R,
             tc=jnp.full(n, jnp.inf, f), partner=jnp.full(n, n, jnp.int32), t_rebuild=jnp.asarray(-jnp.inf, f),
+            tb=jnp.full(n, t0, f), tau=jnp.full(nblk * tblk, jnp.inf, f), tau_blk=jnp.full(nblk, jnp.inf, f),
+            vmx=jnp.asarray(0.0, f), dsp=jnp.asarray(0.0, f), t_dsp=jnp.asarray(-jnp.inf, f),
             n_c=jnp.int32(0), n_c1=jnp.int32(0), n_coag=jnp.int32(0), n_rest=jnp.int32(0), n_steps=jnp.int32(0),
             n_build=jnp.int32(0), flags=jnp.int32(0), n_log=jnp.int32(0), log=log, par=par, key=b.key)
         return st
@@ -883,10 +957,7 @@ def _pair_scan(st, x, u, acc, tol, chunk=None):
         i, j = st.pair_i[pc], st.pair_j[pc]
         ga, gb = st.sph_agg[i], st.sph_agg[j]
         valid = ok & (ga != gb)
-        d = _mimg(x[j] - x[i], L)
-        dist = jnp.sqrt(_dot3(d, d))
-        g = dist - (st.sph_R[i] + st.sph_R[j])
-        gdot = _dot3(d, u[j] - u[i]) / jnp.where(dist > 0, dist, 1.0)
+        g, gdot = _gap_rate(x[i], x[j], u[i], u[j], st.sph_R[i], st.sph_R[j], L)
         A = 2.0 * (acc[ga] + acc[gb])
         ev = valid & (g <= tol) & (gdot < 0)
         # safe time to the gap tol/2, not to contact: a step of t* lands an approaching pair inside the event
@@ -903,19 +974,25 @@ def _pair_scan(st, x, u, acc, tol, chunk=None):
     return tstar, jnp.isfinite(gbest), st.pair_i[ib], st.pair_j[ib]
 
 
-def _agg_event(engine, st, s, t, x, r):
+def _agg_event(engine, st, s, t, pos, members):
     """Resolve the contact of sphere s (aggregate a) with sphere t (aggregate b): coagulation (R8-R12) or
-    restitution (R13-R28) by the outcome rule of the model (R95 §3)."""
+    restitution (R13-R28) by the outcome rule of the model (R95 §3).
+
+    ``pos``: (x_s, x_t, r_s, r_t), the space positions and offsets A b of the two spheres. ``members``: a list of
+    (pred, fn) pairs, fn(state) returning (ids, r): sphere ids that include every member of a and b (``n0`` for
+    none) and their offsets; a coagulation works on the rows of the one pair whose pred holds (all spheres for the
+    global clock; for the per-body clocks, the members in the smallest of a few fixed capacities, _members)."""
     n = st.alive.shape[0]
     a, b = st.sph_agg[s], st.sph_agg[t]
     lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
     L = st.par["L"]
-    d = _mimg(x[t] - x[s], L)
+    xs, xt, rs, rt = pos
+    d = _mimg(xt - xs, L)
     dist = jnp.sqrt(jnp.sum(d * d))
     nhat = d / dist
     Xa = st.X[a]
-    Xb = Xa + r[s] + d - r[t]  # the image of b touching a
-    rc = Xa + r[s] + d * (st.sph_R[s] / (st.sph_R[s] + st.sph_R[t]))
+    Xb = Xa + rs + d - rt  # the image of b touching a
+    rc = Xa + rs + d * (st.sph_R[s] / (st.sph_R[s] + st.sph_R[t]))
     ma, mb = st.M[a], st.M[b]
     Va, Vb = st.V[a], st.V[b]
     mu = ma * mb / (ma + mb)
@@ -938,13 +1015,17 @@ def _agg_event(engine, st, s, t, x, r):
     first = ~((st.last[a] == b) | (st.last[b] == a))
     coag = (e_imp < st.par["e_thr"]) if st.kind == "threshold" else jnp.asarray(True)
 
-    def coagulate(st):
-        in_a = st.sph_agg == a
-        in_b = st.sph_agg == b
+    def coagulate(st, ids, r):
+        ok = ids < n
+        idc = jnp.where(ok, ids, 0)
+        g = st.sph_agg[idc]
+        in_a = ok & (g == a)
+        in_b = ok & (g == b)
         mask = in_a | in_b
         sx = jnp.where(in_b[:, None], Xb[None, :] + r, Xa[None, :] + r)
         X, V, q, Pi, Ip, bnew, Rm = body.merge(Xa, Va, st.q[a], st.Pi[a], st.Ip[a], ma, Xb, Vb, st.q[b], st.Pi[b],
-                                               st.Ip[b], mb, sx, st.sph_m, st.sph_R, mask)
+                                               st.Ip[b], mb, sx, st.sph_m[idc], st.sph_R[idc], mask)
+        tgt = jnp.where(mask, ids, n)
         P1 = (ma + mb) * V
         L1 = (ma + mb) * jnp.cross(X - rc, V) + body.angular_momentum_space(q, Pi)
         ke1 = 0.5 * (ma + mb) * jnp.sum(V * V) + body.kinetic_energy_rot(Pi, Ip)
@@ -955,9 +1036,9 @@ def _agg_event(engine, st, s, t, x, r):
             (st.X.at[lo].set(_wrap(X, L)), st.V.at[lo].set(V).at[hi].set(0.0), st.q.at[lo].set(q),
              st.Pi.at[lo].set(Pi).at[hi].set(0.0), st.Ip.at[lo].set(Ip), st.M.at[lo].set(ma + mb).at[hi].set(0.0),
              st.Rmax.at[lo].set(Rm).at[hi].set(0.0), st.nmem.at[lo].set(st.nmem[a] + st.nmem[b]).at[hi].set(0),
-             st.alive.at[hi].set(False), st.last.at[lo].set(hi), jnp.where(mask[:, None], bnew, st.sph_b),
-             jnp.where(mask, lo, st.sph_agg).astype(jnp.int32), st.n_coag + 1))
-        return st, P1, L1, ke1, jnp.int32(COAGULATION)
+             st.alive.at[hi].set(False), st.last.at[lo].set(hi), st.sph_b.at[tgt].set(bnew, mode="drop"),
+             st.sph_agg.at[tgt].set(lo, mode="drop"), st.n_coag + 1))
+        return st, _changes(P1, L1, ke1), jnp.int32(COAGULATION)
 
     def restitute(st):
         Ia = body.inertia_inv_space(st.q[a], st.Ip[a])
@@ -977,28 +1058,42 @@ def _agg_event(engine, st, s, t, x, r):
         st = eqx.tree_at(lambda s: (s.V, s.Pi, s.last, s.n_rest), st,
                          (st.V.at[a].set(V1).at[b].set(V2), st.Pi.at[a].set(Pi1).at[b].set(Pi2),
                           st.last.at[a].set(b).at[b].set(a), st.n_rest + 1))
-        return st, P1, L1, ke1, jnp.int32(RESTITUTION)
+        return st, _changes(P1, L1, ke1), jnp.int32(RESTITUTION)
 
-    st, P1, L1, ke1, outcome = jax.lax.cond(coag, coagulate, restitute, st)
-    rec = dict(t=st.t, e_imp=e_imp, u_n=u_n, m_a=ma, m_b=mb, dP=jnp.sqrt(jnp.sum((P1 - P0) ** 2)),
-               dL=jnp.sqrt(jnp.sum((L1 - L0) ** 2)), dKE=ke1 - ke0, P_scale=P_scale, L_scale=L_scale, KE=ke0, a=a,
-               b=b, outcome=outcome)
+    def _changes(P1, L1, ke1):  # inside the branches: computed after them, XLA re-read the old state there
+        return jnp.stack([jnp.sqrt(jnp.sum((P1 - P0) ** 2)), jnp.sqrt(jnp.sum((L1 - L0) ** 2)), ke1 - ke0])
+
+    # the record of the state before the event is written first, and the outcome's numbers after the branches: a
+    # log write after them, fused with reads of the state as it was, made XLA copy every written state array
+    i_log = st.n_log
+    st = _write_log(st, dict(t=st.t, e_imp=e_imp, u_n=u_n, m_a=ma, m_b=mb, dP=0.0, dL=0.0, dKE=0.0, P_scale=P_scale,
+                             L_scale=L_scale, KE=ke0, a=a, b=b, outcome=0))
     st = eqx.tree_at(lambda s: (s.n_c, s.n_c1), st, (st.n_c + 1, st.n_c1 + first.astype(jnp.int32)))
-    del n
-    return _write_log(st, rec)
+    # the branches as gated loops, not a lax.cond: a cond copied the state arrays in and out of them (_gated)
+    c0 = (st, jnp.zeros(3, P0.dtype), jnp.int32(0))
+    for pred, fn in members:
+        c0 = _gated(coag & pred, lambda c, fn=fn: coagulate(c[0], *fn(c[0])), c0)
+    st, chg, outcome = _gated(~coag, lambda c: restitute(c[0]), c0)
+    log = dict(st.log)
+    for k, v in (("dP", chg[0]), ("dL", chg[1]), ("dKE", chg[2]), ("outcome", outcome)):
+        log[k] = log[k].at[i_log].set(jnp.asarray(v, log[k].dtype), mode="drop")
+    return eqx.tree_at(lambda s: s.log, st, log)
 
 
-def _agg_advance(engine, st, dt, Om):
-    # per-body substep counts, |ω| h <= 0.02 for each body (spec A3; Om bounds |ω| over the free motion)
+def _spinning(st):
+    """Bodies whose orientation moves: live aggregates and spinning spheres (a free sphere with Π = 0 keeps q = 1
+    exactly), so the rotation work follows them."""
+    return st.alive & ((st.nmem > 1) | jnp.any(st.Pi != 0, axis=-1))
+
+
+def _rotate_chunks(st, dt, nsub, spin):
+    """Torque-free rotation of the bodies ``spin`` over ``dt`` (scalar or (n,)) in ``nsub`` (n,) substeps each, in
+    chunks of spinning bodies (128 on a CPU: :func:`_lanes`), those needing more than half the largest count first,
+    so that most chunks hold bodies of similar counts: a chunk loops to its largest count and masks the others
+    (:func:`~jaxcoag.aggregates.rigid.body.rotate_free_batch`). (Sorting by ceil log2 n_sub with a cumsum over
+    (n0, 7) one-hot classes cost ~0.5 ms per step at 3e4 spheres, more than it saved.) Returns (q, Pi)."""
     n = st.alive.shape[0]
-    # only live aggregates and spinning spheres move in orientation (a free sphere with Π = 0 keeps q = 1
-    # exactly), so the work follows them
-    spin = st.alive & ((st.nmem > 1) | jnp.any(st.Pi != 0, axis=-1))
-    nsub = jnp.where(spin, jnp.clip(jnp.ceil(Om * dt / 0.02), 1, engine.n_rot), 0).astype(jnp.int32)
-    # the spinning bodies in chunks (128 on a CPU: _lanes), those needing more than half the largest count first,
-    # so that most chunks hold bodies of similar counts: a chunk loops to its largest count and masks the others
-    # (body.rotate_free_batch). (Sorting by ceil log2 n_sub with a cumsum over (n0, 7) one-hot classes cost
-    # ~0.5 ms per step at 3e4 spheres, more than it saved.)
+    per_body = jnp.ndim(dt) > 0
     fast = spin & (2 * nsub > jnp.max(nsub))
     cf, cs = jnp.cumsum(fast), jnp.cumsum(spin)
     pos = jnp.where(fast, cf - 1, jnp.where(spin, cf[-1] + (cs - cf) - 1, n))
@@ -1011,11 +1106,19 @@ def _agg_advance(engine, st, dt, Om):
         p = c * B + lane
         ok = p < m
         sl = jnp.where(ok, ids[jnp.minimum(p, n - 1)], 0)
-        qb, pb = body.rotate_free_batch(qp[0][sl], qp[1][sl], st.Ip[sl], dt, jnp.where(ok, nsub[sl], 1))
+        qb, pb = body.rotate_free_batch(qp[0][sl], qp[1][sl], st.Ip[sl], dt[sl] if per_body else dt,
+                                        jnp.where(ok, nsub[sl], 1))
         tgt = jnp.where(ok, sl, n)
         return qp[0].at[tgt].set(qb, mode="drop"), qp[1].at[tgt].set(pb, mode="drop")
 
-    q, Pi = jax.lax.fori_loop(0, (m + B - 1) // B, chunk, (st.q, st.Pi))
+    return jax.lax.fori_loop(0, (m + B - 1) // B, chunk, (st.q, st.Pi))
+
+
+def _agg_advance(engine, st, dt, Om):
+    # per-body substep counts, |ω| h <= 0.02 for each body (spec A3; Om bounds |ω| over the free motion)
+    spin = _spinning(st)
+    nsub = jnp.where(spin, jnp.clip(jnp.ceil(Om * dt / 0.02), 1, engine.n_rot), 0).astype(jnp.int32)
+    q, Pi = _rotate_chunks(st, dt, nsub, spin)
     X = jnp.where(st.alive[:, None], _wrap(st.X + st.V * dt, st.par["L"]), st.X)
     return eqx.tree_at(lambda s: (s.X, s.q, s.Pi, s.t), st, (X, q, Pi, st.t + dt))
 
@@ -1061,10 +1164,257 @@ def _agg_loop(engine, st, t_seg, nc_max):
             s = eqx.tree_at(lambda z: z.t, s, target)
             return s, _record(o, k, s)
 
-        st, outs = jax.lax.switch(which, [lambda s, o: (_agg_event(engine, s, s_ev, t_ev, x, r), o),
+        ev_pos = (x[s_ev], x[t_ev], r[s_ev], r[t_ev])
+        every = [(jnp.asarray(True), lambda _: (jnp.arange(x.shape[0], dtype=jnp.int32), r))]
+        st, outs = jax.lax.switch(which, [lambda s, o: (_agg_event(engine, s, s_ev, t_ev, ev_pos, every), o),
                                           lambda s, o: (_agg_advance(engine, s, dt_free, Om), o),
                                           out_at,
                                           lambda s, o: (s, _record(o, k, s))], st, outs)
+        return st, k + jnp.where(which >= 2, 1, 0), outs
+
+    st, _, outs = jax.lax.while_loop(cond, body_fn, (st, jnp.int32(0), _empty_outputs(st, T)))
+    return st, outs
+
+
+# ------------------------------------------------------------------------------------------------ per-body clocks
+_NSUB_MAX = 1 << 30
+
+
+def _gated(pred, fn, carry):
+    """``fn(carry)`` if ``pred`` else ``carry``, as a loop of 0 or 1 trips. XLA updates a while loop's carry in
+    place; a ``lax.cond``/``lax.switch`` over the state made it copy every state array into and out of the
+    branches at each iteration (~135 copies, ~250 us per pair check at n0 = 300)."""
+    return jax.lax.fori_loop(0, jnp.asarray(pred).astype(jnp.int32), lambda _, c: fn(c), carry)
+
+
+def _nsub_free(Om, dt):
+    """Substeps of |ω| h <= 0.02 (spec A3) for a free rotation over dt with spin bound Om (no cap but 2^30)."""
+    return jnp.clip(jnp.ceil(Om * dt / 0.02), 1, _NSUB_MAX).astype(jnp.int32)
+
+
+def _sync(st, t_new):
+    """Every live body from its own clock ``tb`` to ``t_new`` (free translation, torque-free rotation with
+    |ω| h <= 0.02 in each body's own substeps); then ``tb = t = t_new``."""
+    dt = t_new - st.tb
+    spin = _spinning(st) & (dt > 0)
+    nsub = jnp.where(spin, _nsub_free(body.max_spin(st.Pi, st.Ip), dt), 0)
+    q, Pi = _rotate_chunks(st, dt, nsub, spin)
+    X = jnp.where(st.alive[:, None], _wrap(st.X + st.V * dt[:, None], st.par["L"]), st.X)
+    return eqx.tree_at(lambda s: (s.X, s.q, s.Pi, s.tb, s.t), st,
+                       (X, q, Pi, jnp.full_like(st.tb, t_new), jnp.asarray(t_new, st.t.dtype)))
+
+
+def _bodies_to(st, ids, t_new):
+    """Bodies ``ids`` (k,) from their clocks to ``t_new`` (as :func:`_sync`, for these bodies only)."""
+    dt = t_new - st.tb[ids]
+    q0, Pi0, Ip = st.q[ids], st.Pi[ids], st.Ip[ids]
+    spin = st.alive[ids] & ((st.nmem[ids] > 1) | jnp.any(Pi0 != 0, axis=-1)) & (dt > 0)
+    nsub = jnp.where(spin, _nsub_free(body.max_spin(Pi0, Ip), dt), 1)
+    q, Pi = jax.lax.cond(jnp.any(spin), lambda: body.rotate_free_batch(q0, Pi0, Ip, dt, nsub), lambda: (q0, Pi0))
+    q = jnp.where(spin[:, None], q, q0)
+    Pi = jnp.where(spin[:, None], Pi, Pi0)
+    X = jnp.where(st.alive[ids][:, None], _wrap(st.X[ids] + st.V[ids] * dt[:, None], st.par["L"]), st.X[ids])
+    # max(t_new, tb) = t_new (clocks only advance); written so, the write follows the read of tb (a write that did
+    # not depend on it made XLA copy tb)
+    return eqx.tree_at(lambda s: (s.X, s.q, s.Pi, s.tb), st,
+                       (st.X.at[ids].set(X), st.q.at[ids].set(q), st.Pi.at[ids].set(Pi),
+                        st.tb.at[ids].set(jnp.maximum(t_new, t_new - dt))))
+
+
+def _speed_bound(st, ids=None):
+    """|V| + Ω R_max of the live bodies (all, or ``ids``): a bound on the speed of each of their spheres."""
+    sel = (lambda a: a) if ids is None else (lambda a: a[ids])
+    V, Om = sel(st.V), body.max_spin(sel(st.Pi), sel(st.Ip))
+    return jnp.max(jnp.where(sel(st.alive), jnp.sqrt(_dot3(V, V)) + Om * sel(st.Rmax), 0.0))
+
+
+def _deadline(t, dsp, vmx, skin):
+    """Time at which a sphere may have moved skin/2 since the build (displacement bound dsp at t, speed <= vmx)."""
+    return t + jnp.where(vmx > 0, (0.5 * skin - dsp) / jnp.where(vmx > 0, vmx, 1.0), jnp.inf)
+
+
+def _argmin2(x):
+    """(index of the smallest entry, the second smallest value) of a 1-D array in one reduction (ties: the first
+    index, and the second smallest equals the smallest)."""
+    idx = jnp.arange(x.shape[0], dtype=jnp.int32)
+
+    def comb(a, b):
+        (ma, ia, sa), (mb, ib, sb) = a, b
+        first = (ma < mb) | ((ma == mb) & (ia < ib))
+        return (jnp.where(first, ma, mb), jnp.where(first, ia, ib),
+                jnp.minimum(jnp.minimum(sa, sb), jnp.maximum(ma, mb)))
+
+    inf = jnp.asarray(jnp.inf, x.dtype)
+    _, i, s = jax.lax.reduce((x, idx, jnp.full_like(x, jnp.inf)), (inf, jnp.int32(x.shape[0]), inf), comb, (0,))
+    return i, s
+
+
+def _tau_pass(st, n_chunks, fn):
+    """Apply ``fn(c, p, ok, tau_chunk) -> new tau chunk`` to the blocks c < n_chunks of the pair check times and
+    keep their block minima."""
+    B = st.tau.shape[0] // st.tau_blk.shape[0]
+    lane = jnp.arange(B, dtype=jnp.int32)
+
+    def one(c, carry):
+        tau, blk = carry
+        p = c * B + lane
+        ok = p < st.n_pairs
+        tc = fn(jnp.where(ok, p, 0), ok, jax.lax.dynamic_slice(tau, (c * B,), (B,)))
+        return jax.lax.dynamic_update_slice(tau, tc, (c * B,)), blk.at[c].set(jnp.min(tc))
+
+    return jax.lax.fori_loop(0, n_chunks, one, (st.tau, st.tau_blk))
+
+
+def _tau_scan(engine, st, x, u, tol, n_old):
+    """Next check time of every listed pair from the synchronised state (positions x, velocities u of the
+    spheres at ``st.t``): ``t + eta t*`` with t* the safe time to the gap tol/2 (as the global step), ``t`` for a
+    pair in the event band, ``inf`` for pairs of one aggregate and for unused slots (up to the larger of the old
+    and new pair counts ``n_old``, ``st.n_pairs``)."""
+    B = st.tau.shape[0] // st.tau_blk.shape[0]
+    Om = body.max_spin(st.Pi, st.Ip)
+    acc = Om * Om * st.Rmax
+    L = st.par["L"]
+
+    def fn(pc, ok, _):
+        i, j = st.pair_i[pc], st.pair_j[pc]
+        ga, gb = st.sph_agg[i], st.sph_agg[j]
+        valid = ok & (ga != gb)
+        g, gdot = _gap_rate(x[i], x[j], u[i], u[j], st.sph_R[i], st.sph_R[j], L)
+        ev = (g <= tol) & (gdot < 0)
+        ts = jnp.where(ev, 0.0, engine.eta * body.safe_time(g - 0.5 * tol, gdot, 2.0 * (acc[ga] + acc[gb])))
+        return jnp.where(valid, st.t + ts, jnp.inf)
+
+    n = jnp.maximum(st.n_pairs, n_old)
+    tau, blk = _tau_pass(st, (n + B - 1) // B, fn)
+    return eqx.tree_at(lambda s: (s.tau, s.tau_blk), st, (tau, blk))
+
+
+def _renew(engine, st, t_new, nc_max, tol, force):
+    """Synchronise every body at ``t_new``; rebuild the pair list if a sphere moved more than 0.4 skin since the
+    last build (or none was built); scan every pair's check time after a rebuild (or if ``force``); restart the
+    displacement bound from the measured displacement and the current speed bound."""
+    st = _sync(st, t_new)
+    x, _, u = _sphere_pos(st)
+    dsp_v = _mimg(x - st.x_ref, st.par["L"])
+    disp = jnp.sqrt(jnp.max(jax.lax.optimization_barrier(_dot3(dsp_v, dsp_v))))
+    rebuild = (disp > 0.4 * st.par["skin"]) | (st.n_build == 0)
+    n_old = st.n_pairs
+    st = _gated(rebuild, lambda s: _agg_rebuild(engine, s, x, nc_max), st)
+    disp = jnp.where(rebuild, 0.0, disp)
+    st = _gated(rebuild | force, lambda s: _tau_scan(engine, s, x, u, tol, n_old), st)
+    vmx = _speed_bound(st)
+    return eqx.tree_at(lambda s: (s.dsp, s.vmx, s.t_dsp, s.t_rebuild), st,
+                       (disp, vmx, st.t, _deadline(st.t, disp, vmx, st.par["skin"])))
+
+
+def _members(st, a, b):
+    """The ``members`` argument of :func:`_agg_event` for the per-body clocks: the sphere ids of aggregates a and b
+    (and their offsets A b) in the smallest of the capacities 64, 1024, 8192, n0 that holds nmem[a] + nmem[b], so
+    that a coagulation costs O(members) plus one pass over the sphere owners (``jnp.nonzero``)."""
+    n = st.alive.shape[0]
+    need = st.nmem[a] + st.nmem[b]
+    sizes = [c for c in (64, 1024, 8192) if c < n] + [n]
+    out, lo = [], 0
+    for c in sizes:
+        def fill(st, c=c):  # the state the gated loop carries (a captured one would make XLA copy it)
+            ids = jnp.nonzero((st.sph_agg == a) | (st.sph_agg == b), size=c, fill_value=n)[0].astype(jnp.int32)
+            return ids, _sphere_pos_of(st, jnp.where(ids < n, ids, 0))[1]
+        out.append(((need > lo) & (need <= c), fill))
+        lo = c
+    return out
+
+
+def _check_pair(engine, st, p, blk, te, m2, tol):
+    """Check listed pair p at its check time te: bring its two bodies to te, then either resolve the contact
+    (:func:`_agg_event`: g <= tol, ġ < 0) and set the check time of every pair of the two bodies to te, or
+    set its next check time te + eta t* (inf for a pair inside one aggregate)."""
+    B = st.tau.shape[0] // st.tau_blk.shape[0]
+    i, j = st.pair_i[p], st.pair_j[p]
+    a, b = st.sph_agg[i], st.sph_agg[j]
+    ab = jnp.stack([a, b])
+    st = _bodies_to(st, ab, te)
+    st = eqx.tree_at(lambda s: s.t, st, te)
+    x2, _, u2 = _sphere_pos_of(st, jnp.stack([i, j]))
+    g, gdot = _gap_rate(x2[0], x2[1], u2[0], u2[1], st.sph_R[i], st.sph_R[j], st.par["L"])
+    Om = body.max_spin(st.Pi[ab], st.Ip[ab])
+    A = 2.0 * jnp.sum(Om * Om * st.Rmax[ab])
+    same = a == b
+    event = ~same & (g <= tol) & (gdot < 0)
+
+    # the next check (after an event the pass over the pairs of both bodies sets it to te again)
+    nxt = jnp.where(same, jnp.inf, te + engine.eta * body.safe_time(g - 0.5 * tol, gdot, A))
+    # the block's new minimum from its second smallest entry m2 (read with the choice of p): a read of the block
+    # after the write needed the old tau beside the new one, and XLA copied the whole of tau at every check
+    st = eqx.tree_at(lambda s: (s.tau, s.tau_blk), st,
+                     (st.tau.at[p].set(nxt), st.tau_blk.at[blk].set(jnp.minimum(m2, nxt))))
+
+    def collide(st):
+        xr = _sphere_pos_of(st, jnp.stack([i, j]))
+        st = _agg_event(engine, st, i, j, (xr[0][0], xr[0][1], xr[1][0], xr[1][1]), _members(st, a, b))
+        agg = st.sph_agg
+
+        def fn(pc, ok, tc):
+            gi, gj = agg[st.pair_i[pc]], agg[st.pair_j[pc]]
+            hit = ok & ((gi == a) | (gi == b) | (gj == a) | (gj == b))
+            return jnp.where(hit, te, tc)
+
+        tau, tblk = _tau_pass(st, (st.n_pairs + B - 1) // B, fn)
+        dsp = st.dsp + st.vmx * (te - st.t_dsp)
+        vmx = jnp.maximum(st.vmx, _speed_bound(st, ab))
+        return eqx.tree_at(lambda s: (s.tau, s.tau_blk, s.dsp, s.vmx, s.t_dsp, s.t_rebuild), st,
+                           (tau, tblk, dsp, vmx, te, _deadline(te, dsp, vmx, st.par["skin"])))
+
+    return _gated(event, collide, st)
+
+
+def _agg_loop_body(engine, st, t_seg, nc_max):
+    """Models (iii)-(v) with per-body clocks (module docstring): one pair check, resynchronisation or output per
+    loop iteration, always the earliest of (next pair check, rebuild deadline, next output time)."""
+    T = t_seg.shape[0]
+    tol = engine.tol * st.par["r0"]
+    B = st.tau.shape[0] // st.tau_blk.shape[0]
+    # a state whose check times are not valid (fresh, or last advanced with the global clock) scans every pair
+    st = _gated(~jnp.isfinite(st.t_dsp), lambda s: _renew(engine, s, s.t, nc_max, tol, True), st)
+
+    def earliest(st):
+        # the time from the block minima (equal to the slot's entry): a read of tau itself, fused into the
+        # consumers after tau's in-place write, made XLA copy the whole of tau at every check
+        blk = jnp.argmin(st.tau_blk).astype(jnp.int32)
+        l, m2 = _argmin2(jax.lax.dynamic_slice(st.tau, (blk * B,), (B,)))
+        return blk * B + l, blk, st.tau_blk[blk], m2
+
+    def halted(st):
+        return _stopped(st) | (st.n_steps >= engine.max_steps)
+
+    def count(st):
+        return eqx.tree_at(lambda s: (s.n_steps, s.flags), st,
+                           (st.n_steps + 1, st.flags | jnp.where(st.n_steps + 1 >= engine.max_steps, 4, 0)))
+
+    def cond(c):
+        return c[1] < T
+
+    def body_fn(c):
+        st, k, outs = c
+        target = t_seg[k]
+
+        # pair checks up to the next resynchronisation or output (the loop's own carry is updated in place)
+        def due(st):
+            return (earliest(st)[2] < jnp.minimum(target, st.t_rebuild)) & ~halted(st)
+
+        def check(st):
+            p, blk, te, m2 = earliest(st)
+            return _check_pair(engine, count(st), p, blk, te, m2, tol)
+
+        st = jax.lax.while_loop(due, check, st)
+        which = jnp.where(halted(st), 3, jnp.where(st.t_rebuild < target, 1, 2))
+        st = count(st)
+
+        def record(so):
+            s = _sync(so[0], jnp.where(which == 2, jnp.maximum(target, so[0].t), so[0].t))
+            return s, _record(so[1], k, s)
+
+        st = _gated(which == 1, lambda s: _renew(engine, s, jnp.maximum(s.t_rebuild, s.t), nc_max, tol, False), st)
+        st, outs = _gated(which >= 2, record, (st, outs))
         return st, k + jnp.where(which >= 2, 1, 0), outs
 
     st, _, outs = jax.lax.while_loop(cond, body_fn, (st, jnp.int32(0), _empty_outputs(st, T)))
@@ -1075,7 +1425,12 @@ def _agg_loop(engine, st, t_seg, nc_max):
 def _advance_jit(engine, st, t_seg, nc_max):
     if st.kind in _SPHERE_KINDS:
         return _sphere_loop(engine, st, t_seg, nc_max)
-    return _agg_loop(engine, st, t_seg, nc_max)
+    if (engine.clock or _lanes("body", "global")) == "body":
+        return _agg_loop_body(engine, st, t_seg, nc_max)
+    st, outs = _agg_loop(engine, st, t_seg, nc_max)
+    # every body at the common time; the per-pair check times are not kept by this clock
+    st = eqx.tree_at(lambda s: (s.tb, s.t_dsp), st, (jnp.full_like(st.tb, st.t), jnp.asarray(-jnp.inf, st.t.dtype)))
+    return st, outs
 
 
 # ------------------------------------------------------------------------------------------------ result
