@@ -12,16 +12,17 @@ the window. The exponent b of ``wall per unit time ~ N^b`` is the least-squares 
 standard error (scipy.stats.linregress). Both clocks of ``RigidBox`` run side by side on the same boxes:
 ``clock="body"`` (per-body clocks, the default) and ``clock="global"`` (one conservative-advancement step for
 the whole box), with the ratio of their wall times per size; each window is timed ``--repeat`` times (default
-2) and the fastest call is reported. Writes benchmarks/results/rigid_scaling[_quick].json (``rows``: the
-default clock; ``clocks``: every clock run) and prints a table; the machine record (with the load
-average) goes into the JSON.
+2) and the fastest call is reported; each (N, clock) runs in a fresh process (``--same-process`` to share
+one). Writes benchmarks/results/rigid_scaling[_quick].json (``rows``: the default clock; ``clocks``: every
+clock run) and prints a table; the machine record (with the load average) goes into the JSON.
 
     python benchmarks/rigid_scaling.py [--quick] [--sizes 1000,3000,10000,30000,100000] [--clocks body,global]
-        [--repeat 2] [--out PATH]
+        [--repeat 2] [--same-process] [--out PATH]
 """
 
 import argparse
 import math
+import multiprocessing
 import os
 import sys
 import time
@@ -47,8 +48,9 @@ def window(n0):
 
 def timed(n0, seed=1, t_a=T_A, dt=None, clock=None, repeat=1):
     """Compile + short run to t_a, then the timed continuation over dt (default window(n0); module docstring), with
-    ``RigidBox(clock=clock)`` (None: the engine's default for the backend); with ``repeat`` > 1 the same continuation (from the same state: the same work) is
-    timed that many times and the fastest is reported (single calls on this shared machine varied up to 1.7x).
+    ``RigidBox(clock=clock)`` (None: the engine's default for the backend); with ``repeat`` > 1 the same
+    continuation (from the same state: the same work) is timed that many times and the fastest is reported (single
+    calls on this shared machine varied up to 1.7x).
     Also reports ``setup_s``, the wall time of ``box_model`` (the random placement of n0 spheres)."""
     engine = rigid.RigidBox(clock=clock)
     L = 10.0 * (n0 / 9000.0) ** (1.0 / 3.0)
@@ -96,6 +98,8 @@ def main(argv=None):
     ap.add_argument("--clocks", default="body,global", help="RigidBox clocks to run side by side (default both)")
     ap.add_argument("--repeat", type=int, default=2,
                     help="timed calls of each window, the fastest reported (default 2)")
+    ap.add_argument("--same-process", action="store_true",
+                    help="run every size and clock in this process (default: a fresh process for each)")
     ap.add_argument("--out", default=None, help="JSON path (default benchmarks/results/rigid_scaling[_quick].json)")
     args = ap.parse_args(argv)
     if args.sizes:
@@ -117,7 +121,11 @@ def main(argv=None):
           f"{'s / unit t':>10} {'ms/step':>8} {'ms/coll.':>9} {'first call [s]':>14} status")
     for n0 in sizes:
         for c in clocks:
-            r = timed(n0, clock=c, repeat=args.repeat)
+            if args.same_process:
+                r = timed(n0, clock=c, repeat=args.repeat)
+            else:  # a fresh process per run: in one process the later runs were up to 2.5x slower (2026-11-28)
+                with multiprocessing.get_context("spawn").Pool(1) as pool:
+                    r = pool.apply(timed, (n0,), dict(clock=c, repeat=args.repeat))
             rows[c].append(r)
             print(f"{n0:7d} {c:>6} {r['window']:7.3f} {r['steps']:7d} {r['collisions']:6d} {r['rebuilds']:8d} "
                   f"{r['wall_s']:9.2f} {r['wall_per_time']:10.1f} {r['wall_per_step_ms']:8.3f} "
