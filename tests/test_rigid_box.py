@@ -87,6 +87,15 @@ def test_argmin2_and_tau_block_width():
         assert float(m2) == float(np.min(rest))
     assert [rbox._tau_block(P) for P in (1, 1000, 24_000, 240_000, 2_400_000, 10**9)] == [128, 128, 256, 512, 2048,
                                                                                             4096]
+    # the numbers of a contact through the state field ev: exact round trip, ids and flags restored
+    num = {k: jnp.asarray(rng.normal(size=3)) for k in rbox._EV_VEC}
+    num.update({k: jnp.asarray(rng.normal()) for k in rbox._EV_SCAL})
+    num.update(a=jnp.int32(123456), b=jnp.int32(7), first=jnp.asarray(True), coag=jnp.asarray(False))
+    back = rbox._unpack_event(rbox._pack_event(num))
+    assert rbox._pack_event(num).shape == (rbox.EV_SIZE,) and set(back) == set(num)
+    for k in num:
+        np.testing.assert_array_equal(np.asarray(back[k]), np.asarray(num[k]))
+    assert [np.asarray(back[k]).dtype for k in ("a", "b", "first", "coag")] == [np.int32, np.int32, bool, bool]
 
 
 # ------------------------------------------------------------------------------------------------ initial state
@@ -378,14 +387,21 @@ def test_checkpoint_resume_equals_uninterrupted(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("model", ["iii", "iv"])
-def test_body_and_global_clocks_resolve_the_same_collisions(model):
+@pytest.mark.parametrize("model", ["iii", "iv", "iv-bound"])
+def test_body_and_global_clocks_resolve_the_same_collisions(model, monkeypatch):
     """The per-body clocks (each listed pair checked at its own time, bodies advanced lazily) against the global
     conservative-advancement step, n0 = 300 to T = 0.6: the same collisions (pairs, outcomes, N(t), N_C), contact
     times within 1e-3 (the two clocks detect a contact at different points of the band g <= tol and integrate the
     rotations in different substeps), P, L and KE conserved per collision as the model demands, and every body's
-    clock at the output time."""
+    clock at the output time. "iv-bound": every collision gives the pairs of its two bodies the conservative next
+    check in one pass that large aggregates get (box._BIG_EVENT = 0), instead of a check each from now."""
     t = jnp.array([0.2, 0.4, 0.6])
+    if model == "iv-bound":
+        from jaxcoag.aggregates.rigid import box as rbox
+
+        model = "iv"
+        monkeypatch.setattr(rbox, "_BIG_EVENT", 0)
+        jax.clear_caches()  # read at trace time
     runs = {}
     for clock in ("global", "body"):
         b = rigid.box_model(model, n0=300, box=6.0, v0=13.0, key=jax.random.key(4))

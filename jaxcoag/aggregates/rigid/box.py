@@ -316,7 +316,8 @@ class BoxState(eqx.Module):
     (models iii-v, ``RigidBox(clock="body")``): ``tb`` the time at which each body's ``X``, ``q``, ``Pi`` hold,
     ``tau`` the next check time of each listed pair (blocks of ``tau.size // tau_blk.size``, ``tau_blk`` their
     minima), the displacement bound ``dsp`` of any sphere since the build at time ``t_dsp`` (``-inf``: ``tau``
-    not valid, the next run scans every pair first) and the speed bound ``vmx`` (max of ``|V| + Ω R_max``) since.
+    not valid, the next run scans every pair first), the speed bound ``vmx`` (max of ``|V| + Ω R_max``) since, and
+    ``ev``, the numbers of the last contact found (:func:`_pack_event`), read by the collision that resolves it.
     Counters: collisions ``n_c``, first-time collisions ``n_c1``, coagulations ``n_coag``, restitutions
     ``n_rest``, loop iterations ``n_steps`` (global steps; with per-body clocks pair checks, resynchronisations
     and outputs), rebuilds ``n_build``; ``nc_max`` (static) cells per box side; ``flags`` bit 0 log full, bit 1
@@ -356,6 +357,7 @@ class BoxState(eqx.Module):
     vmx: jax.Array
     dsp: jax.Array
     t_dsp: jax.Array
+    ev: jax.Array
     n_c: jax.Array
     n_c1: jax.Array
     n_coag: jax.Array
@@ -693,7 +695,7 @@ class RigidBox(AbstractEngine):
             x_ref=jnp.asarray(b.x, f), r_ref=R,
             tc=jnp.full(n, jnp.inf, f), partner=jnp.full(n, n, jnp.int32), t_rebuild=jnp.asarray(-jnp.inf, f),
             tb=jnp.full(n, t0, f), tau=jnp.full(nblk * tblk, jnp.inf, f), tau_blk=jnp.full(nblk, jnp.inf, f),
-            vmx=jnp.asarray(0.0, f), dsp=jnp.asarray(0.0, f), t_dsp=jnp.asarray(-jnp.inf, f),
+            vmx=jnp.asarray(0.0, f), dsp=jnp.asarray(0.0, f), t_dsp=jnp.asarray(-jnp.inf, f), ev=jnp.zeros(EV_SIZE, f),
             n_c=jnp.int32(0), n_c1=jnp.int32(0), n_coag=jnp.int32(0), n_rest=jnp.int32(0), n_steps=jnp.int32(0),
             n_build=jnp.int32(0), flags=jnp.int32(0), n_log=jnp.int32(0), log=log, par=par, key=b.key)
         return st
@@ -974,17 +976,43 @@ def _pair_scan(st, x, u, acc, tol, chunk=None):
     return tstar, jnp.isfinite(gbest), st.pair_i[ib], st.pair_j[ib]
 
 
+#: the numbers of a contact before it is resolved (:func:`_event_numbers`): 3-vectors, then scalars
+_EV_VEC = ("Xa", "Xb", "Va", "Vb", "rc", "c1", "c2", "wa", "wb", "nhat", "P0", "L0")
+_EV_SCAL = ("ma", "mb", "u_n", "e_imp", "P_scale", "L_scale", "ke0", "first", "coag", "a", "b")
+EV_SIZE = 3 * len(_EV_VEC) + len(_EV_SCAL)
+
+
+def _pack_event(num):
+    """The numbers of :func:`_event_numbers` as one float64 vector of EV_SIZE (the state field ``ev``)."""
+    return jnp.concatenate([jnp.asarray(num[k], jnp.float64).reshape(3) for k in _EV_VEC]
+                           + [jnp.asarray(num[k], jnp.float64).reshape(1) for k in _EV_SCAL])
+
+
+def _unpack_event(v):
+    """Inverse of :func:`_pack_event` (slot ids back to int32, flags to bool)."""
+    num = {k: v[3 * i:3 * i + 3] for i, k in enumerate(_EV_VEC)}
+    off = 3 * len(_EV_VEC)
+    num.update({k: v[off + i] for i, k in enumerate(_EV_SCAL)})
+    num["a"], num["b"] = (jnp.round(num[k]).astype(jnp.int32) for k in ("a", "b"))
+    num["first"], num["coag"] = num["first"] > 0.5, num["coag"] > 0.5
+    return num
+
+
 def _agg_event(engine, st, s, t, pos, members):
     """Resolve the contact of sphere s (aggregate a) with sphere t (aggregate b): coagulation (R8-R12) or
-    restitution (R13-R28) by the outcome rule of the model (R95 §3).
+    restitution (R13-R28) by the outcome rule of the model (R95 §3): :func:`_event_apply` of
+    :func:`_event_numbers`."""
+    return _event_apply(engine, st, _event_numbers(st, s, t, pos), members)
 
-    ``pos``: (x_s, x_t, r_s, r_t), the space positions and offsets A b of the two spheres. ``members``: a list of
-    (pred, fn) pairs, fn(state) returning (ids, r): sphere ids that include every member of a and b (``n0`` for
-    none) and their offsets; a coagulation works on the rows of the one pair whose pred holds (all spheres for the
-    global clock; for the per-body clocks, the members in the smallest of a few fixed capacities, _members)."""
-    n = st.alive.shape[0]
+
+def _event_numbers(st, s, t, pos):
+    """The numbers of the contact of sphere s (aggregate a) with sphere t (aggregate b) before it is resolved: the
+    two bodies' COMs (b's image touching a), velocities, spins, masses, the contact point and its arms, the normal,
+    the normal speed, the impact energy, momentum, angular momentum and kinetic energy with their scales, whether it
+    is the pair's first collision and whether it coagulates (the model's outcome rule).
+
+    ``pos``: (x_s, x_t, r_s, r_t), the space positions and offsets A b of the two spheres."""
     a, b = st.sph_agg[s], st.sph_agg[t]
-    lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
     L = st.par["L"]
     xs, xt, rs, rt = pos
     d = _mimg(xt - xs, L)
@@ -1014,6 +1042,24 @@ def _agg_event(engine, st, s, t, pos, members):
                + jnp.sqrt(jnp.sum(hA * hA)) + jnp.sqrt(jnp.sum(hB * hB)))
     first = ~((st.last[a] == b) | (st.last[b] == a))
     coag = (e_imp < st.par["e_thr"]) if st.kind == "threshold" else jnp.asarray(True)
+    return dict(Xa=Xa, Xb=Xb, Va=Va, Vb=Vb, rc=rc, c1=c1, c2=c2, wa=wa, wb=wb, nhat=nhat, P0=P0, L0=L0, ma=ma, mb=mb,
+                u_n=u_n, e_imp=e_imp, P_scale=P_scale, L_scale=L_scale, ke0=ke0, first=first, coag=coag, a=a, b=b)
+
+
+def _event_apply(engine, st, num, members):
+    """Resolve a contact from its numbers (:func:`_event_numbers`): coagulation (R8-R12) or restitution (R13-R28),
+    the collision log and the counters.
+
+    ``members``: a list of (pred, fn) pairs, fn(state) returning (ids, r): sphere ids that include every member of
+    a and b (``n0`` for none) and their offsets; a coagulation works on the rows of the one pair whose pred holds
+    (all spheres for the global clock; for the per-body clocks, the members in the smallest of a few fixed
+    capacities, :func:`_members`)."""
+    n = st.alive.shape[0]
+    a, b = num["a"], num["b"]
+    lo, hi = jnp.minimum(a, b), jnp.maximum(a, b)
+    Xa, Xb, Va, Vb, rc, c1, c2, wa, wb, nhat = (num[k] for k in ("Xa", "Xb", "Va", "Vb", "rc", "c1", "c2", "wa", "wb",
+                                                                 "nhat"))
+    ma, mb, u_n, P0, L0, ke0, coag = (num[k] for k in ("ma", "mb", "u_n", "P0", "L0", "ke0", "coag"))
 
     def coagulate(st, ids, r):
         ok = ids < n
@@ -1033,7 +1079,7 @@ def _agg_event(engine, st, s, t, pos, members):
             lambda s: (s.X, s.V, s.q, s.Pi, s.Ip, s.M, s.Rmax, s.nmem, s.alive, s.last, s.sph_b, s.sph_agg,
                        s.n_coag),
             st,
-            (st.X.at[lo].set(_wrap(X, L)), st.V.at[lo].set(V).at[hi].set(0.0), st.q.at[lo].set(q),
+            (st.X.at[lo].set(_wrap(X, st.par["L"])), st.V.at[lo].set(V).at[hi].set(0.0), st.q.at[lo].set(q),
              st.Pi.at[lo].set(Pi).at[hi].set(0.0), st.Ip.at[lo].set(Ip), st.M.at[lo].set(ma + mb).at[hi].set(0.0),
              st.Rmax.at[lo].set(Rm).at[hi].set(0.0), st.nmem.at[lo].set(st.nmem[a] + st.nmem[b]).at[hi].set(0),
              st.alive.at[hi].set(False), st.last.at[lo].set(hi), st.sph_b.at[tgt].set(bnew, mode="drop"),
@@ -1066,9 +1112,9 @@ def _agg_event(engine, st, s, t, pos, members):
     # the record of the state before the event is written first, and the outcome's numbers after the branches: a
     # log write after them, fused with reads of the state as it was, made XLA copy every written state array
     i_log = st.n_log
-    st = _write_log(st, dict(t=st.t, e_imp=e_imp, u_n=u_n, m_a=ma, m_b=mb, dP=0.0, dL=0.0, dKE=0.0, P_scale=P_scale,
-                             L_scale=L_scale, KE=ke0, a=a, b=b, outcome=0))
-    st = eqx.tree_at(lambda s: (s.n_c, s.n_c1), st, (st.n_c + 1, st.n_c1 + first.astype(jnp.int32)))
+    st = _write_log(st, dict(t=st.t, e_imp=num["e_imp"], u_n=u_n, m_a=ma, m_b=mb, dP=0.0, dL=0.0, dKE=0.0,
+                             P_scale=num["P_scale"], L_scale=num["L_scale"], KE=ke0, a=a, b=b, outcome=0))
+    st = eqx.tree_at(lambda s: (s.n_c, s.n_c1), st, (st.n_c + 1, st.n_c1 + num["first"].astype(jnp.int32)))
     # the branches as gated loops, not a lax.cond: a cond copied the state arrays in and out of them (_gated)
     c0 = (st, jnp.zeros(3, P0.dtype), jnp.int32(0))
     for pred, fn in members:
@@ -1249,9 +1295,9 @@ def _argmin2(x):
     return i, s
 
 
-def _tau_pass(st, n_chunks, fn):
-    """Apply ``fn(c, p, ok, tau_chunk) -> new tau chunk`` to the blocks c < n_chunks of the pair check times and
-    keep their block minima."""
+def _tau_pass(st, n_chunks, fn, carry=None):
+    """Apply ``fn(p, ok, tau_chunk) -> new tau chunk`` to the blocks c < n_chunks of the pair check times (those of
+    ``carry`` = (tau, tau_blk), default the state's) and keep their block minima."""
     B = st.tau.shape[0] // st.tau_blk.shape[0]
     lane = jnp.arange(B, dtype=jnp.int32)
 
@@ -1262,7 +1308,7 @@ def _tau_pass(st, n_chunks, fn):
         tc = fn(jnp.where(ok, p, 0), ok, jax.lax.dynamic_slice(tau, (c * B,), (B,)))
         return jax.lax.dynamic_update_slice(tau, tc, (c * B,)), blk.at[c].set(jnp.min(tc))
 
-    return jax.lax.fori_loop(0, n_chunks, one, (st.tau, st.tau_blk))
+    return jax.lax.fori_loop(0, n_chunks, one, (st.tau, st.tau_blk) if carry is None else carry)
 
 
 def _tau_scan(engine, st, x, u, tol, n_old):
@@ -1325,46 +1371,81 @@ def _members(st, a, b):
 
 
 def _check_pair(engine, st, p, blk, te, m2, tol):
-    """Check listed pair p at its check time te: bring its two bodies to te, then either resolve the contact
-    (:func:`_agg_event`: g <= tol, ġ < 0) and set the check time of every pair of the two bodies to te, or
-    set its next check time te + eta t* (inf for a pair inside one aggregate)."""
-    B = st.tau.shape[0] // st.tau_blk.shape[0]
+    """Check listed pair p at its check time te: bring its two bodies to te and set the pair's next check time
+    te + eta t* (inf for a pair inside one aggregate). Returns (state, whether the pair is in contact: g <= tol,
+    ġ < 0); for a contact the state's ``ev`` holds its numbers (:func:`_event_numbers`), for :func:`_collide_pair`.
+    """
     i, j = st.pair_i[p], st.pair_j[p]
     a, b = st.sph_agg[i], st.sph_agg[j]
     ab = jnp.stack([a, b])
     st = _bodies_to(st, ab, te)
     st = eqx.tree_at(lambda s: s.t, st, te)
-    x2, _, u2 = _sphere_pos_of(st, jnp.stack([i, j]))
+    x2, r2, u2 = _sphere_pos_of(st, jnp.stack([i, j]))
     g, gdot = _gap_rate(x2[0], x2[1], u2[0], u2[1], st.sph_R[i], st.sph_R[j], st.par["L"])
     Om = body.max_spin(st.Pi[ab], st.Ip[ab])
     A = 2.0 * jnp.sum(Om * Om * st.Rmax[ab])
     same = a == b
-    event = ~same & (g <= tol) & (gdot < 0)
-
-    # the next check (after an event the pass over the pairs of both bodies sets it to te again)
+    hit = ~same & (g <= tol) & (gdot < 0)
+    # the next check (after a contact the pass over the pairs of both bodies sets it to te again)
     nxt = jnp.where(same, jnp.inf, te + engine.eta * body.safe_time(g - 0.5 * tol, gdot, A))
     # the block's new minimum from its second smallest entry m2 (read with the choice of p): a read of the block
     # after the write needed the old tau beside the new one, and XLA copied the whole of tau at every check
-    st = eqx.tree_at(lambda s: (s.tau, s.tau_blk), st,
-                     (st.tau.at[p].set(nxt), st.tau_blk.at[blk].set(jnp.minimum(m2, nxt))))
+    ev = _gated(hit, lambda _: _pack_event(_event_numbers(st, i, j, (x2[0], x2[1], r2[0], r2[1]))), st.ev)
+    st = eqx.tree_at(lambda s: (s.tau, s.tau_blk, s.ev), st,
+                     (st.tau.at[p].set(nxt), st.tau_blk.at[blk].set(jnp.minimum(m2, nxt)), ev))
+    return st, hit
 
-    def collide(st):
-        xr = _sphere_pos_of(st, jnp.stack([i, j]))
-        st = _agg_event(engine, st, i, j, (xr[0][0], xr[0][1], xr[1][0], xr[1][1]), _members(st, a, b))
-        agg = st.sph_agg
 
-        def fn(pc, ok, tc):
-            gi, gj = agg[st.pair_i[pc]], agg[st.pair_j[pc]]
-            hit = ok & ((gi == a) | (gi == b) | (gj == a) | (gj == b))
-            return jnp.where(hit, te, tc)
+#: members of a colliding pair above which the pairs of the two bodies get a conservative next check in one pass
+_BIG_EVENT = 32
 
-        tau, tblk = _tau_pass(st, (st.n_pairs + B - 1) // B, fn)
-        dsp = st.dsp + st.vmx * (te - st.t_dsp)
-        vmx = jnp.maximum(st.vmx, _speed_bound(st, ab))
-        return eqx.tree_at(lambda s: (s.tau, s.tau_blk, s.dsp, s.vmx, s.t_dsp, s.t_rebuild), st,
-                           (tau, tblk, dsp, vmx, te, _deadline(te, dsp, vmx, st.par["skin"])))
 
-    return _gated(event, collide, st)
+def _collide_pair(engine, st, tol):
+    """Resolve the contact found by :func:`_check_pair` at the current time from its numbers ``st.ev`` (reading no
+    state as it was before the collision's writes: such reads, fused by XLA into code it hoists out of the gated
+    branches, made it copy every written state array at each collision), set the check time of every pair of the
+    two bodies to now, and update the displacement bound and the rebuild deadline with their new speeds."""
+    B = st.tau.shape[0] // st.tau_blk.shape[0]
+    te = st.t
+    num = _unpack_event(st.ev)
+    a, b = num["a"], num["b"]
+    big = st.nmem[a] + st.nmem[b] > _BIG_EVENT
+    st = _event_apply(engine, st, num, _members(st, a, b))
+    agg = st.sph_agg
+    nch = (st.n_pairs + B - 1) // B
+
+    def flag(pc, ok, tc):
+        gi, gj = agg[st.pair_i[pc]], agg[st.pair_j[pc]]
+        hit = ok & ((gi == a) | (gi == b) | (gj == a) | (gj == b))
+        return jnp.where(hit, te, tc)
+
+    def bound(pc, ok, tc):
+        # a conservative next check for every pair of the two bodies at once: the partner body is at its own clock
+        # tb; its spheres are translated to te and given the slack min(2 R_max, Ω R_max (te - tb)) for the
+        # rotation, and the gap cannot close faster than |V_j - V_i| + Ω_i R_max,i + Ω_j R_max,j
+        i, j = st.pair_i[pc], st.pair_j[pc]
+        gi, gj = agg[i], agg[j]
+        hit = ok & ((gi == a) | (gi == b) | (gj == a) | (gj == b))
+        (xi, _, _), (xj, _, _) = _sphere_pos_of(st, i), _sphere_pos_of(st, j)
+        dti, dtj = te - st.tb[gi], te - st.tb[gj]
+        Oi, Oj = body.max_spin(st.Pi[gi], st.Ip[gi]), body.max_spin(st.Pi[gj], st.Ip[gj])
+        Ri, Rj = st.Rmax[gi], st.Rmax[gj]
+        slack = jnp.minimum(2.0 * Ri, Oi * Ri * dti) + jnp.minimum(2.0 * Rj, Oj * Rj * dtj)
+        d = _mimg(xj + st.V[gj] * dtj[:, None] - xi - st.V[gi] * dti[:, None], st.par["L"])
+        g = jnp.sqrt(_dot3(d, d)) - st.sph_R[i] - st.sph_R[j] - slack
+        dv = st.V[gj] - st.V[gi]
+        w = jnp.sqrt(_dot3(dv, dv)) + Oi * Ri + Oj * Rj
+        ts = jnp.where(w > 0, jnp.maximum(g - 0.5 * tol, 0.0) / jnp.where(w > 0, w, 1.0), jnp.inf)
+        return jnp.where(hit, jnp.where(gi == gj, jnp.inf, te + engine.eta * ts), tc)
+
+    # small aggregates: their few pairs are checked one by one from now; large ones (hundreds of pairs, each a
+    # loop iteration) get the conservative bound in one pass
+    tau, tblk = _gated(~big, lambda c: _tau_pass(st, nch, flag, c), (st.tau, st.tau_blk))
+    tau, tblk = _gated(big, lambda c: _tau_pass(st, nch, bound, c), (tau, tblk))
+    dsp = st.dsp + st.vmx * (te - st.t_dsp)
+    vmx = jnp.maximum(st.vmx, _speed_bound(st, jnp.stack([a, b])))
+    return eqx.tree_at(lambda s: (s.tau, s.tau_blk, s.dsp, s.vmx, s.t_dsp, s.t_rebuild), st,
+                       (tau, tblk, dsp, vmx, te, _deadline(te, dsp, vmx, st.par["skin"])))
 
 
 def _agg_loop_body(engine, st, t_seg, nc_max):
@@ -1397,17 +1478,19 @@ def _agg_loop_body(engine, st, t_seg, nc_max):
         st, k, outs = c
         target = t_seg[k]
 
-        # pair checks up to the next resynchronisation or output (the loop's own carry is updated in place)
-        def due(st):
-            return (earliest(st)[2] < jnp.minimum(target, st.t_rebuild)) & ~halted(st)
+        # pair checks up to the next contact, resynchronisation or output (the loop's carry is updated in place);
+        # the contact is resolved after the loop, from the numbers the check stored
+        def due(c):
+            return (earliest(c[0])[2] < jnp.minimum(target, c[0].t_rebuild)) & ~halted(c[0]) & ~c[1]
 
-        def check(st):
-            p, blk, te, m2 = earliest(st)
-            return _check_pair(engine, count(st), p, blk, te, m2, tol)
+        def check(c):
+            p, blk, te, m2 = earliest(c[0])
+            return _check_pair(engine, count(c[0]), p, blk, te, m2, tol)
 
-        st = jax.lax.while_loop(due, check, st)
-        which = jnp.where(halted(st), 3, jnp.where(st.t_rebuild < target, 1, 2))
-        st = count(st)
+        st, hit = jax.lax.while_loop(due, check, (st, jnp.asarray(False)))
+        st = _gated(hit, lambda s: _collide_pair(engine, s, tol), st)
+        which = jnp.where(hit, 0, jnp.where(halted(st), 3, jnp.where(st.t_rebuild < target, 1, 2)))
+        st = _gated(which > 0, count, st)
 
         def record(so):
             s = _sync(so[0], jnp.where(which == 2, jnp.maximum(target, so[0].t), so[0].t))
