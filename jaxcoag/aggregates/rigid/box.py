@@ -1386,11 +1386,11 @@ def _check_pair(engine, st, p, blk, te, m2, tol):
     A = 2.0 * jnp.sum(Om * Om * st.Rmax[ab])
     same = a == b
     hit = ~same & (g <= tol) & (gdot < 0)
-    # the next check (after a contact the pass over the pairs of both bodies sets it to te again)
-    nxt = jnp.where(same, jnp.inf, te + engine.eta * body.safe_time(g - 0.5 * tol, gdot, A))
-    # the block's new minimum from its second smallest entry m2 (read with the choice of p): a read of the block
-    # after the write needed the old tau beside the new one, and XLA copied the whole of tau at every check
     ev = _gated(hit, lambda _: _pack_event(_event_numbers(st, i, j, (x2[0], x2[1], r2[0], r2[1]))), st.ev)
+    # the next check (after a contact the pass over the pairs of both bodies sets it to te again); the block's new
+    # minimum from its second smallest entry m2 (read with the choice of p): a read of the block after the write
+    # needed the old tau beside the new one, and XLA copied the whole of tau at every check
+    nxt = jnp.where(same, jnp.inf, te + engine.eta * body.safe_time(g - 0.5 * tol, gdot, A))
     st = eqx.tree_at(lambda s: (s.tau, s.tau_blk, s.ev), st,
                      (st.tau.at[p].set(nxt), st.tau_blk.at[blk].set(jnp.minimum(m2, nxt)), ev))
     return st, hit
@@ -1449,8 +1449,9 @@ def _collide_pair(engine, st, tol):
 
 
 def _agg_loop_body(engine, st, t_seg, nc_max):
-    """Models (iii)-(v) with per-body clocks (module docstring): one pair check, resynchronisation or output per
-    loop iteration, always the earliest of (next pair check, rebuild deadline, next output time)."""
+    """Models (iii)-(v) with per-body clocks (module docstring). Each iteration of the outer loop runs the pair checks
+    in time order (an inner loop) until a contact, the rebuild deadline or the next output time comes first, then
+    resolves the contact, resynchronises (and rebuilds the list if due) or records the output."""
     T = t_seg.shape[0]
     tol = engine.tol * st.par["r0"]
     B = st.tau.shape[0] // st.tau_blk.shape[0]
