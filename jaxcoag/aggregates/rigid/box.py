@@ -1126,10 +1126,11 @@ def _event_apply(engine, st, num, members):
     return eqx.tree_at(lambda s: s.log, st, log)
 
 
-def _spinning(st):
-    """Bodies whose orientation moves: live aggregates and spinning spheres (a free sphere with Π = 0 keeps q = 1
-    exactly), so the rotation work follows them."""
-    return st.alive & ((st.nmem > 1) | jnp.any(st.Pi != 0, axis=-1))
+def _spinning(st, ids=None):
+    """Bodies (all, or ``ids``) whose orientation moves: live aggregates and spinning spheres (a free sphere with
+    Π = 0 keeps q = 1 exactly), so the rotation work follows them."""
+    sel = (lambda a: a) if ids is None else (lambda a: a[ids])
+    return sel(st.alive) & ((sel(st.nmem) > 1) | jnp.any(sel(st.Pi) != 0, axis=-1))
 
 
 def _rotate_chunks(st, dt, nsub, spin):
@@ -1254,7 +1255,7 @@ def _bodies_to(st, ids, t_new):
     """Bodies ``ids`` (k,) from their clocks to ``t_new`` (as :func:`_sync`, for these bodies only)."""
     dt = t_new - st.tb[ids]
     q0, Pi0, Ip = st.q[ids], st.Pi[ids], st.Ip[ids]
-    spin = st.alive[ids] & ((st.nmem[ids] > 1) | jnp.any(Pi0 != 0, axis=-1)) & (dt > 0)
+    spin = _spinning(st, ids) & (dt > 0)
     nsub = jnp.where(spin, _nsub_free(body.max_spin(Pi0, Ip), dt), 1)
     q, Pi = jax.lax.cond(jnp.any(spin), lambda: body.rotate_free_batch(q0, Pi0, Ip, dt, nsub), lambda: (q0, Pi0))
     q = jnp.where(spin[:, None], q, q0)
