@@ -45,9 +45,9 @@ V0, SEED = 13.0, 1
 #: larger capacity costs only where it is used
 NEIGHBORS, CELL_CAPACITY = 96, 64
 #: the global clock: in this run's later stages large spinning aggregates keep many pairs near contact, which the
-#: global step scans at once and the per-body clocks check one by one (2 cores, 2026-11-27/28: the whole run to
-#: T = 40.8 took 453 s with the global clock; with per-body clocks T = 16.8 took 310 s, in segments of 1.6 time
-#: units growing from 20 to 35 s, and the run was stopped there)
+#: global step scans at once and the per-body clocks check one by one (2 cores: the whole run to T = 40.8 took 453 s
+#: with the global clock on 2026-11-27; with per-body clocks 459 s on 2026-11-28, 195 s of it to T = 16.8 and 264 s
+#: for the last ~120 collisions)
 CLOCK = "global"
 
 

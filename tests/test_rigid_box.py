@@ -17,6 +17,7 @@ test that runs it is marked ``slow``:
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -98,6 +99,45 @@ def test_argmin2_and_tau_block_width():
     assert [np.asarray(back[k]).dtype for k in ("a", "b", "first", "coag")] == [np.int32, np.int32, bool, bool]
 
 
+def _member_lists_ok(st):
+    """Every live aggregate's member list (box state mem[mem0[a] : mem0[a] + nmem[a]]) holds exactly its spheres."""
+    mem, mem0, nmem, agg = (np.asarray(v) for v in (st.mem, st.mem0, st.nmem, st.sph_agg))
+    top = int(st.mem_top)
+    for a in np.nonzero(np.asarray(st.alive))[0]:
+        assert mem0[a] + nmem[a] <= top
+        assert sorted(mem[mem0[a]:mem0[a] + nmem[a]].tolist()) == np.nonzero(agg == a)[0].tolist()
+    return True
+
+
+def test_member_lists_append_and_compact():
+    """box._mem_append / _mem_compact (the per-aggregate member lists that make a collision O(members)): a sequence
+    of merges whose lists overflow the capacity 2 n0 compacts the live lists to the front, after every merge each
+    live aggregate's list holds exactly its spheres, and box._segment_ids reads a's list then b's, padded."""
+    from jaxcoag.aggregates.rigid import box as rbox
+
+    n = 8
+    b = rigid.box_model("iii", n0=n, r0=0.1, box=5.0, key=KEY)
+    st = rigid.RigidBox()._init(None, b, 0.0, None, None)
+    assert int(st.mem_top) == n and st.mem.shape == (2 * n,)
+    seg = jax.jit(rbox._segment_ids, static_argnums=3)
+    app = jax.jit(rbox._mem_append)
+    tops = []
+    for a, c in [(0, 1), (2, 3), (0, 2), (4, 5), (6, 7), (0, 4), (0, 6)]:
+        ids = seg(st, a, c, n)
+        want = sorted(np.nonzero((np.asarray(st.sph_agg) == a) | (np.asarray(st.sph_agg) == c))[0].tolist())
+        got = np.asarray(ids)
+        assert sorted(got[got < n].tolist()) == want and np.all(got[len(want):] == n)
+        st = app(st, ids, ids < n, jnp.int32(a))
+        st = eqx.tree_at(lambda s: (s.nmem, s.alive, s.sph_agg), st,
+                         (st.nmem.at[a].set(st.nmem[a] + st.nmem[c]).at[c].set(0), st.alive.at[c].set(False),
+                          jnp.where(st.sph_agg == c, a, st.sph_agg)))
+        assert _member_lists_ok(st)
+        tops.append(int(st.mem_top))
+    # 8 + 2, + 2, + 4 = 16 (full); a list that does not fit compacts the live lists to 8 first: 8 + 2, + 2;
+    # 8 + 6; 8 + 8
+    assert tops == [10, 12, 16, 10, 12, 14, 16]
+
+
 # ------------------------------------------------------------------------------------------------ initial state
 def test_box_model_initial_conditions():
     b = rigid.box_model("i", n0=400, v0=3.0, key=KEY)
@@ -176,12 +216,29 @@ def test_flat_pair_build_equals_brute_force():
 
     build = jax.jit(rbox._build_pairs, static_argnums=(4, 5, 6, 7, 8))
     P = 4 * len(ref)
-    pi, pj, npair, over = build(jnp.asarray(x), jnp.asarray(Rs), jnp.asarray(grp), L, skin, int(deg.max()), P, nc, 64)
+    pi, pj, npair, over, rs, rt, nrev = build(jnp.asarray(x), jnp.asarray(Rs), jnp.asarray(grp), L, skin,
+                                              int(deg.max()), P, nc, 64)
     k = int(npair)
     got = list(zip(np.asarray(pi)[:k].tolist(), np.asarray(pj)[:k].tolist()))
     assert k == len(ref) and not bool(over)
     assert sorted(got) == ref
     assert np.all(np.diff(np.asarray(pi)[:k]) >= 0)  # row-major: rows in order
+    # the reverse entries: every pair once more from its larger sphere, rows in order
+    assert int(nrev) == k
+    assert sorted(zip(np.asarray(rt)[:k].tolist(), np.asarray(rs)[:k].tolist())) == ref
+    assert np.all(np.diff(np.asarray(rs)[:k]) >= 0)
+    # the pairs of each sphere (box._adjacency) against the brute-force list: forward and reverse, each pair index
+    # exactly once per sphere of the pair
+    fwd0, degf, rev0, degr, rev_p, bad = jax.jit(rbox._adjacency, static_argnums=(6, 7))(pi, pj, npair, rs, rt, nrev,
+                                                                                         n, 16)
+    assert not bool(bad)
+    fwd0, degf, rev0, degr, rev_p = (np.asarray(v) for v in (fwd0, degf, rev0, degr, rev_p))
+    pin, pjn = np.asarray(pi)[:k], np.asarray(pj)[:k]
+    for s_ in range(n):
+        mine = list(range(fwd0[s_], fwd0[s_] + degf[s_])) + rev_p[rev0[s_]:rev0[s_] + degr[s_]].tolist()
+        assert len(mine) == len(set(mine)) == deg[s_]
+        assert {frozenset((int(pin[p]), int(pjn[p]))) for p in mine} == {frozenset((s_, int(t))) for t in
+                                                                         np.nonzero(near[s_])[0]}
     # the accelerator's block width (box._lanes: 2^20, one block holds every candidate): the same list
     wide = build(jnp.asarray(x), jnp.asarray(Rs), jnp.asarray(grp), L, skin, int(deg.max()), P, nc, 1 << 20)
     assert int(wide[2]) == k and not bool(wide[3])
@@ -416,6 +473,7 @@ def test_body_and_global_clocks_resolve_the_same_collisions(model, monkeypatch):
     assert np.all(bd["dP"] <= 1e-12 * bd["P_scale"]) and np.all(bd["dL"] <= 1e-10 * bd["L_scale"])
     st = runs["body"].final_state
     assert np.all(np.asarray(st.tb) == 0.6) and float(st.t) == 0.6
+    assert _member_lists_ok(st) and _member_lists_ok(runs["global"].final_state)
     # the pair check times are all in the future, and the body clock used several checks per global step's worth
     al = np.asarray(st.tau)[: int(st.n_pairs)]
     assert np.all(al >= 0.6)
