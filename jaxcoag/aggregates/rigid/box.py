@@ -1205,16 +1205,15 @@ def _mem_append(st, ids, mask, lo):
     ``mem``, compacting ``mem`` first when it would not fit (:func:`_mem_compact`: amortised O(1) per member)."""
     cap = st.mem.shape[0]
     cnt = jnp.sum(mask).astype(jnp.int32)
-    # the gated compaction carries the three arrays it writes, not the state: a loop carrying every state array made
-    # XLA copy the orientations, owners and list starts (n0 each) into it at every coagulation
-    mem, mem0, top = _gated(st.mem_top + cnt > cap, lambda c: _mem_compact(*c, st.alive, st.nmem),
+    # the gated compaction carries only the arrays it writes
+    mem, mem0, top = _gated(st.mem_top + cnt > cap, lambda c: _mem_compact(c[0], c[1], st.alive, st.nmem),
                             (st.mem, st.mem0, st.mem_top))
     pos = top + jnp.cumsum(mask).astype(jnp.int32) - 1
     return eqx.tree_at(lambda s: (s.mem, s.mem0, s.mem_top), st,
                        (mem.at[jnp.where(mask, pos, cap)].set(ids, mode="drop"), mem0.at[lo].set(top), top + cnt))
 
 
-def _mem_compact(mem, mem0, top, alive, nmem):
+def _mem_compact(mem, mem0, alive, nmem):
     """Move the member lists of the live aggregates to the front of ``mem`` in their order (the lists of merged
     aggregates left behind are dropped). Returns (mem, mem0, mem_top); mem_top becomes n0, so a list of up to n0 more
     members fits."""
