@@ -1480,9 +1480,7 @@ def _members(st, a, b):
     for c in _buckets(n):
         def fill(st, c=c):  # the state the gated loop carries (a captured one would make XLA copy it)
             ids = _segment_ids(st, a, b, c)
-            # materialised before the coagulation's writes: fused into their consumers after them, the reads of the
-            # member lists and counts made XLA copy mem0 and nmem (n0 each) at every coagulation
-            return jax.lax.optimization_barrier((ids, _sphere_pos_of(st, jnp.where(ids < n, ids, 0))[1]))
+            return ids, _sphere_pos_of(st, jnp.where(ids < n, ids, 0))[1]
         out.append(((need > lo) & (need <= c), fill))
         lo = c
     return out
