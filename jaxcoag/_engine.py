@@ -116,6 +116,14 @@ class AbstractResult(eqx.Module):
         return self.moments(2) / self.moments(1)
 
 
+#: XLA options for the compiled loop of an event-driven engine (top-level ``jax.jit`` only: under another trace the
+#: options belong to the outermost jit, so the engines call their plain program there). Without while-loop-invariant
+#: code motion: rare work runs in gated 0/1-trip loops, and XLA moved the parts of it that read only state those loops
+#: do not write out of them into the enclosing loop, where they ran at every event (array-sized work per event in the
+#: rigid box's per-body clocks and the Monte Carlo engine; docs/design_notes.md, "A collision in O(members)").
+LOOP_XLA_OPTIONS = {"xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
+
+
 class AbstractEngine(eqx.Module):
     """Numerical strategy of a run (structure as static fields / classes, numbers as leaves).
 

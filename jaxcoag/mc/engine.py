@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._engine import AbstractEngine, AbstractResult, Monodisperse
+from .._engine import LOOP_XLA_OPTIONS, AbstractEngine, AbstractResult, Monodisperse
 from .._status import result_from_code
 from .._validate import JaxcoagInputError, is_traced
 from ..kernels import AbstractKernel
@@ -609,9 +609,7 @@ def _advance_impl(cfg, p, state):
 
 
 _advance_jit = eqx.filter_jit(_advance_impl)
-#: the top-level program (not under another trace: XLA options belong to the outermost jit) is compiled without
-#: XLA's while-loop-invariant code motion, which moved the capacity-sized parts of the event loop's rarely taken
-#: branches out of them into the loop, where they ran at every event (CPU, Ns* = 100, to t = 5: 89 against 50 us per
-#: event at capacity 12 800, 31 against 24 at 150)
-_advance_top = eqx.filter_jit(_advance_impl, compiler_options={"xla_disable_hlo_passes":
-                                                              "while-loop-invariant-code-motion"})
+#: the top-level program, compiled with LOOP_XLA_OPTIONS: code motion had moved capacity-sized work of the event
+#: loop's rarely taken branches into the loop (CPU, Ns* = 100, to t = 5, two probes each: 89-93 against 53-54 us
+#: per event at capacity 12 800, 31-65 against 28-39 at 150)
+_advance_top = eqx.filter_jit(_advance_impl, compiler_options=LOOP_XLA_OPTIONS)

@@ -47,7 +47,7 @@ Numerical scheme (all arrays have the fixed capacity ``n0``):
     (:func:`_mem_append`) and each sphere its listed pairs (:func:`_adjacency`, built with the list), so that
     no collision passes over all spheres or pairs, and the work per unit time grows about as n0 instead of
     n0² (the global clock's step shrinks as 1/n0 and each step touches every sphere). This program is compiled
-    without XLA's loop-invariant code motion (:data:`_XLA_OPTIONS`).
+    without XLA's loop-invariant code motion (:data:`jaxcoag._engine.LOOP_XLA_OPTIONS`).
   - ``RigidBox(clock="global")`` (the default on an accelerator): one step ``dt = η min t*`` over all pairs
     for the whole box, every body advanced at every step (the bodies needing more than half the largest
     substep count first).
@@ -91,7 +91,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._engine import AbstractEngine, AbstractResult, evolve
+from ..._engine import LOOP_XLA_OPTIONS, AbstractEngine, AbstractResult, evolve
 from ..._status import RESULTS, result_code, result_from_code, result_table
 from ..._validate import JaxcoagInputError, is_traced, require_x64
 from . import body
@@ -725,7 +725,7 @@ class RigidBox(AbstractEngine):
         return st
 
     def _advance(self, kernel, state, t_seg, outcome):
-        # the per-body clocks compile without loop-invariant code motion (_XLA_OPTIONS); inside another trace
+        # the per-body clocks compile without loop-invariant code motion (LOOP_XLA_OPTIONS); inside another trace
         # (jax.eval_shape of a checkpointed run, a user's jit) XLA options belong to the outer jit
         body_clock = state.kind not in _SPHERE_KINDS and (self.clock or _lanes("body", "global")) == "body"
         f = _advance_body if body_clock and not is_traced((state.t, t_seg)) else _advance_jit
@@ -1663,14 +1663,6 @@ def _agg_loop_body(engine, st, t_seg, nc_max):
     return st, outs
 
 
-#: XLA options of the compiled advance: no while-loop-invariant code motion. The rare work of the loops runs in
-#: gated 0/1-trip loops (:func:`_gated`); XLA moved the parts of it that read only state those loops do not write
-#: (the output record, the speed bound and a member list's pair count, each over all n0) out of them into the
-#: enclosing loop, where they ran at every collision: a window at 1e5 spheres took 2.6 s with them, 1.25 s without.
-#: Used for the per-body clocks only (the global clock's passes are not gated and gain nothing).
-_XLA_OPTIONS = {"xla_disable_hlo_passes": "while-loop-invariant-code-motion"}
-
-
 def _advance_impl(engine, st, t_seg, nc_max):
     if st.kind in _SPHERE_KINDS:
         return _sphere_loop(engine, st, t_seg, nc_max)
@@ -1683,7 +1675,9 @@ def _advance_impl(engine, st, t_seg, nc_max):
 
 
 _advance_jit = jax.jit(_advance_impl, static_argnums=(0, 3))
-_advance_body = jax.jit(_advance_impl, static_argnums=(0, 3), compiler_options=_XLA_OPTIONS)
+#: the per-body clocks with LOOP_XLA_OPTIONS: without, a window at 1e5 spheres took 2.6 s instead of 1.25 s (the
+#: global clock's passes are not gated and gained nothing)
+_advance_body = jax.jit(_advance_impl, static_argnums=(0, 3), compiler_options=LOOP_XLA_OPTIONS)
 
 
 # ------------------------------------------------------------------------------------------------ result
