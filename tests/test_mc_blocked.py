@@ -296,6 +296,37 @@ def test_run_is_the_same_at_two_capacities():
     assert not np.any(np.asarray(b.valid)[:, 600:])
 
 
+@pytest.mark.parametrize("grouping", ["equal_mass", "distribution"])
+def test_maintenance_on_the_prefix_window_equals_the_full_arrays(grouping):
+    """The maintenance (scheduled merge, global rezoom, full refresh) runs on the shortest window [0, B) of the
+    slots that holds the species (``run._on_prefix``): on the 260 species of :func:`_state` in 4 096 slots it
+    takes the 1 024-slot window, and gives bit for bit what the same steps give on all 4 096 slots, with the
+    merge (Ns* = 60 asks for ~100 merged pairs) and each grouping's rezoom; R stays 0 past the window."""
+    S4 = 4096
+    assert RUN._prefix_sizes(S4) == (1024, S4) and RUN._prefix_sizes(2047) == (2047,)
+    st0 = _state(3)
+    pad = S4 - S
+
+    def grow(x, fill):
+        return jnp.concatenate([x, jnp.full((pad,) + x.shape[1:], fill, x.dtype)])
+
+    st = st0._replace(m=grow(st0.m, 1.0), logm=grow(st0.logm, 0.0), psi=jnp.zeros((S4, 0)), w=grow(st0.w, 0.0),
+                      z=grow(st0.z, 0), valid=grow(st0.valid, False), R=jnp.full((S4,), 0.5), dirty=jnp.array(True),
+                      rezoom=jnp.array(True), log_mstar=jnp.array(20.0), hi=jnp.array(7, jnp.int32))
+    cfg = RUN._Cfg(mode="const_v", grouping=grouping, capacity=S4, n_snap=1, n_struct=0, n_prod=1,
+                   rates="incremental", n_refresh=10**6, rounding="ceil", controller="species", d_max=1, d_up=1,
+                   n_bins=3, p_protect=2, weighting="mass", dedupe=True, n_rezoom=1)
+    p = dict(P, ns_target=jnp.asarray(60.0), tail_wmax=jnp.asarray(60.0))
+    win = jax.jit(lambda st: RUN._maintenance(cfg, p, st))(st)
+    full = jax.jit(lambda st: RUN._maintain(cfg, p, cfg, st._replace(hi=RUN._active(st.valid)[0])))(st)
+    assert int(RUN._active(st.valid)[0]) == 290
+    assert int(win.n_merge) - int(st.n_merge) >= 90 and int(win.ns) == int(jnp.sum(win.valid)) < 170
+    for f in ("m", "logm", "w", "z", "valid", "R", "s", "hi", "ns", "n_merge", "zoom_xp", "zoom_fp", "zref"):
+        np.testing.assert_array_equal(np.asarray(getattr(win, f)), np.asarray(getattr(full, f)), err_msg=f)
+    assert not np.any(np.asarray(win.R)[1024:]) and np.count_nonzero(np.asarray(win.R)) == int(win.ns)
+    assert not bool(win.dirty) and not bool(win.rezoom)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("volume", [mc.ConstantVolume(), mc.ConstantSpecies()])
 def test_equal_mass_species_count_stays_within_2x_of_target(volume):

@@ -1175,7 +1175,61 @@ def _rezoom_all(cfg, p, st):
     return st._replace(w=w, z=jnp.where(st.valid, z, 0), zoom_xp=xp, zoom_fp=fp, zref=lmax)
 
 
+#: per-slot arrays of the state (leading axis: the S slots)
+_SLOTS = ("m", "logm", "psi", "w", "z", "valid", "R")
+
+
+def _prefix_sizes(S):
+    """Static lengths of the windows of :func:`_on_prefix`: 1024 x 4^k up to S/2, then S."""
+    sizes, B = [], 1024
+    while 2 * B <= S:
+        sizes.append(B)
+        B *= 4
+    return tuple(sizes) + (S,)
+
+
+def _on_prefix(cfg, st, fn):
+    """``fn(cfg_b, st_b)`` on the shortest window [0, B) of the per-slot arrays that holds every valid slot
+    (B from :func:`_prefix_sizes`; ``cfg_b`` = cfg with capacity B, ``st_b`` the state with its per-slot arrays
+    cut to B and ``hi`` set to the current prefix end); fn's per-slot arrays are written back into the first B
+    slots, R is 0 beyond them (as the refresh leaves the slots past the prefix).
+
+    The maintenance's sorts (the merge), per-slot passes (rezoom, the refresh's ln w and row guard) then cost
+    O(B) or O(B log B) instead of O(S log S): a constant-V sum-kernel run holding ~200 species in 51 200 slots
+    (Ns* = 100, to t = 20; a maintenance every ~90 events) took 212 us per event against 48 at 3 200 slots.
+    The results are those of the full arrays: every valid slot lies in the window, empty slots sort last, the
+    per-slot arithmetic does not depend on the window, and the blocks of the passes are the same (B is a
+    multiple of the pass blocks, so no block start is clamped inside it)."""
+    sizes = _prefix_sizes(cfg.capacity)
+    hi0, _ = _active(st.valid)
+
+    def branch(B):
+        if B == cfg.capacity:
+            return lambda st: fn(cfg, st._replace(hi=hi0))
+
+        def f(st):
+            out = fn(dataclasses.replace(cfg, capacity=B), st._replace(hi=hi0, **{n: getattr(st, n)[:B] for n in _SLOTS}))
+            new = {n: getattr(st, n).at[:B].set(getattr(out, n)) for n in _SLOTS}
+            new["R"] = jnp.zeros_like(st.R).at[:B].set(out.R)
+            return out._replace(**new)
+
+        return f
+
+    if len(sizes) == 1:
+        return branch(sizes[0])(st)
+    k = jnp.sum(jnp.asarray(sizes[:-1], jnp.int32) < hi0)
+    return jax.lax.switch(k, [branch(B) for B in sizes], st)
+
+
 def _maintenance(cfg, p, st):
+    """Scheduled or emergency merge, global rezoom and full rate refresh (thesis §5.2.1, App. 5.B), run on the
+    prefix window of the slots that holds the species (:func:`_on_prefix`); the merge thresholds follow the
+    capacity S of ``cfg``."""
+    return _on_prefix(cfg, st, functools.partial(_maintain, cfg, p))
+
+
+def _maintain(cfg, p, cfg_b, st):
+    """:func:`_maintenance` on the window of ``cfg_b`` (per-slot arrays of length cfg_b.capacity)."""
     S = cfg.capacity
     ns = jnp.sum(st.valid)
     emergency = S - ns < cfg.n_prod + 2
@@ -1207,10 +1261,10 @@ def _maintenance(cfg, p, st):
 
     st = jax.lax.cond(do_merge, merge, lambda s: s, st)
     if cfg.grouping is not None:
-        st = jax.lax.cond(st.rezoom, lambda s: _rezoom_all(cfg, p, s), lambda s: s, st)
+        st = jax.lax.cond(st.rezoom, lambda s: _rezoom_all(cfg_b, p, s), lambda s: s, st)
     hi, ns = _active(st.valid)
     st = st._replace(hi=hi, ns=ns)
-    R, s = _refresh(cfg, p, st)
+    R, s = _refresh(cfg_b, p, st)
     st = st._replace(R=R, s=s, n_since_refresh=jnp.array(0, jnp.int64), dirty=jnp.array(False),
                      rezoom=jnp.array(False))
     still_full = cfg.capacity - ns < cfg.n_prod + 2
