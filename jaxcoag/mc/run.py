@@ -1200,7 +1200,9 @@ def _on_prefix(cfg, st, fn):
     The results are those of the full arrays: every valid slot lies in the window, empty slots sort last, the
     per-slot arithmetic does not depend on the window, and the blocks of the passes are the same (B is a
     multiple of the pass blocks, so no block start is clamped inside it)."""
-    sizes = _prefix_sizes(cfg.capacity)
+    # only windows that are multiples of both pass blocks (always so for the default block of 128)
+    sizes = tuple(B for B in _prefix_sizes(cfg.capacity)
+                  if B == cfg.capacity or (B % _B(cfg) == 0 and B % _B(cfg, True) == 0))
     hi0, _ = _active(st.valid)
 
     def branch(B):
@@ -1208,7 +1210,8 @@ def _on_prefix(cfg, st, fn):
             return lambda st: fn(cfg, st._replace(hi=hi0))
 
         def f(st):
-            out = fn(dataclasses.replace(cfg, capacity=B), st._replace(hi=hi0, **{n: getattr(st, n)[:B] for n in _SLOTS}))
+            cut = {n: getattr(st, n)[:B] for n in _SLOTS}
+            out = fn(dataclasses.replace(cfg, capacity=B), st._replace(hi=hi0, **cut))
             new = {n: getattr(st, n).at[:B].set(getattr(out, n)) for n in _SLOTS}
             new["R"] = jnp.zeros_like(st.R).at[:B].set(out.R)
             return out._replace(**new)
