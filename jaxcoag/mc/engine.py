@@ -614,6 +614,6 @@ _advance_jit = eqx.filter_jit(_advance_impl)
 #: per event at capacity 12 800, 31-65 against 28-39 at 150), and without the CPU parallel-task assigner, which
 #: split the event's block fusions (128-512 slots, a few us each) over the threads: their hand-offs cost more than
 #: the split work saves (constant-Ns sum kernel, Ns* = 2000, same events: 76 -> 52 us per event to t = 5,
-#: 203 -> 153 to t = 12; docs/design_notes.md, "The MC event's fusions ran split over the threads").
+#: 203 -> 153 to t = 12; docs/design_notes.md, "The MC maintenance sorted the empty slots; ...").
 MC_XLA_OPTIONS = {"xla_disable_hlo_passes": LOOP_XLA_OPTIONS["xla_disable_hlo_passes"] + ",cpu-parallel-task-assigner"}
 _advance_top = eqx.filter_jit(_advance_impl, compiler_options=MC_XLA_OPTIONS)

@@ -1212,9 +1212,8 @@ def _on_prefix(cfg, st, fn):
         def f(st):
             cut = {n: getattr(st, n)[:B] for n in _SLOTS}
             out = fn(dataclasses.replace(cfg, capacity=B), st._replace(hi=hi0, **cut))
-            new = {n: getattr(st, n).at[:B].set(getattr(out, n)) for n in _SLOTS}
-            new["R"] = jnp.zeros_like(st.R).at[:B].set(out.R)
-            return out._replace(**new)
+            new = {n: getattr(st, n).at[:B].set(getattr(out, n)) for n in _SLOTS if n != "R"}
+            return out._replace(R=jnp.zeros_like(st.R).at[:B].set(out.R), **new)
 
         return f
 
