@@ -28,9 +28,31 @@ from __future__ import annotations
 
 import functools
 
+import importlib
+
 import numpy as np
-from scipy import special
-from scipy.integrate import simpson
+
+
+class _LazyModule:
+    """A module imported on first attribute access: scipy.special and scipy.integrate take ~0.3-0.5 s to
+    import, which every ``import jaxcoag`` (and so every ``jaxcoag run``) paid for the analytic references
+    it seldom uses."""
+
+    def __init__(self, name):
+        self._name = name
+
+    def __getattr__(self, attr):
+        mod = importlib.import_module(self._name)
+        return getattr(mod, attr)
+
+
+special = _LazyModule("scipy.special")
+_integrate = _LazyModule("scipy.integrate")
+
+
+def simpson(*args, **kw):
+    """``scipy.integrate.simpson`` (imported on first use)."""
+    return _integrate.simpson(*args, **kw)
 
 from ._validate import JaxcoagInputError
 

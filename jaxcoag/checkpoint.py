@@ -495,9 +495,22 @@ def _failure_codes():
 
 
 def _concat(a, b):
+    """The outputs so far ``a`` followed by a segment's ``b``, concatenated on the host (numpy; PRNG-key
+    leaves with jax.numpy): an eager ``jnp.concatenate`` compiles again for every new length, i.e. for every
+    segment (0.4 s of the 17 outputs of the default ``jaxcoag run``)."""
+    def cat(x, y):
+        if _is_key(x):
+            return jnp.concatenate([x, y])
+        return np.concatenate([np.asarray(x), np.asarray(y)])
+
     if a is None:
-        return b
-    return jax.tree_util.tree_map(lambda x, y: jnp.concatenate([x, y]), a, b, is_leaf=_is_key)
+        return jax.tree_util.tree_map(lambda x: x if _is_key(x) else np.asarray(x), b, is_leaf=_is_key)
+    return jax.tree_util.tree_map(cat, a, b, is_leaf=_is_key)
+
+
+def _on_device(outs):
+    """The concatenated outputs as JAX arrays again (one transfer per leaf, no compilation)."""
+    return jax.tree_util.tree_map(lambda x: x if _is_key(x) else jnp.asarray(x), outs, is_leaf=_is_key)
 
 
 def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint=None, every=1, resume=True,
@@ -622,4 +635,4 @@ def run_segments(kernel, engine, initial, t_out, *, t0, outcome, key, checkpoint
     if outs is None:
         raise JaxcoagInputError("no output time was computed (max_segments stopped the run before its first "
                                 "segment); raise max_segments.")
-    return engine._result(kernel, t_arr[:n_done], outs, state, outcome)
+    return engine._result(kernel, t_arr[:n_done], _on_device(outs), state, outcome)

@@ -100,7 +100,7 @@ except ImportError:  # pragma: no cover - Python 3.10
 import numpy as np
 import pydantic
 import tomli_w
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from . import constants as C
 from ._validate import JaxcoagInputError
@@ -1033,6 +1033,19 @@ def check_memory(cfg: RunConfig):
                   fix=fix)
 
 
+def _kernel_matrix(kernel, m):
+    """``kernel.matrix(m)`` in one jitted call (equinox ``filter_jit``, built on first use)."""
+    global _KERNEL_MATRIX_JIT
+    if _KERNEL_MATRIX_JIT is None:
+        import equinox as eqx
+
+        _KERNEL_MATRIX_JIT = eqx.filter_jit(lambda k, mm: k.matrix(mm))
+    return _KERNEL_MATRIX_JIT(kernel, m)
+
+
+_KERNEL_MATRIX_JIT = None
+
+
 def build(cfg: RunConfig) -> Built:
     """Build and check every object of a run (no files are touched).
 
@@ -1071,7 +1084,8 @@ def build(cfg: RunConfig) -> Built:
         initial = n0 if cfg.engine == "binned" else initial_state(cfg, grid, gas.rho_g)
     except (ValueError, TypeError) as e:
         raise JaxcoagInputError(f"{section} {e}") from e
-    k = np.asarray(kernel.matrix(jnp.asarray(grid.centers[:: max(1, grid.nbins // 8)])))
+    # one compiled call (evaluated eagerly, the scene kernel's matrix compiled its ~100 operations one by one)
+    k = np.asarray(_kernel_matrix(kernel, jnp.asarray(grid.centers[:: max(1, grid.nbins // 8)])))
     if not np.all(np.isfinite(k)):
         raise JaxcoagInputError("the collision kernel is not finite on the grid for this [gas]/[dust] setting; "
                                 "check the parameters (e.g. z_H, n, T).")

@@ -4,7 +4,9 @@ All functions accept numpy or JAX arrays (mass per bin rho_b [g cm^-3] on a grid
 [g]) and broadcast over leading axes (e.g. output times), so they work on any result's
 ``mass_per_bin(edges)`` with ``bin_edges(edges)`` (binned and Monte Carlo alike; the results'
 ``m2f`` and ``mass_peak`` methods call them), on a dataset's ``mass_per_bin`` with ``m_edge``, and
-inside jit/grad.
+inside jit/grad. JAX arrays (and tracers) are computed with ``jax.numpy`` and give JAX arrays; numpy
+input is computed with numpy and gives numpy (float64) values: eager ``jax.numpy`` compiles every
+operation for every new shape, ~0.1-0.5 s of a ``jaxcoag run``'s output phase for a few such calls.
 
 References: error metrics and noise floor in docs/design_notes.md (Monte Carlo conventions);
 Ormel (2008) thesis §5.3 (m^2 f(m) plots); Birnstiel et al. (2010) (mass peak).
@@ -12,6 +14,7 @@ Ormel (2008) thesis §5.3 (m^2 f(m) plots); Birnstiel et al. (2010) (mass peak).
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 import jax.numpy as jnp
 
@@ -29,10 +32,15 @@ def _log_edges(edges):
     return np.log(e)
 
 
-def _row(v, like):
+def _xp(*xs):
+    """``jax.numpy`` when any argument is a JAX array or tracer, else ``numpy`` (module docstring)."""
+    return jnp if any(isinstance(x, jax.Array) for x in xs) else np
+
+
+def _row(v, like, xp=jnp):
     """Reshape a per-bin vector (nbins,) to broadcast explicitly against ``like`` (..., nbins)."""
-    v = jnp.asarray(v)
-    return v.reshape((1,) * (jnp.ndim(like) - 1) + v.shape)
+    v = xp.asarray(v)
+    return v.reshape((1,) * (xp.ndim(like) - 1) + v.shape)
 
 
 def bin_centers(edges):
@@ -51,11 +59,12 @@ def moment(rho, edges, p):
     Returns: array (...,).
     References: thesis eq. 5.4 (moments), Table 5.1.
     """
+    xp = _xp(rho, p)
     le = _log_edges(edges)
     lc = 0.5 * (le[:-1] + le[1:])
-    rho = jnp.asarray(rho)
-    w = jnp.exp((p - 1.0) * jnp.asarray(lc))
-    return jnp.sum(rho * _row(w, rho), axis=-1)
+    rho = xp.asarray(rho, np.float64) if xp is np else rho
+    w = xp.exp((p - 1.0) * xp.asarray(lc))
+    return xp.sum(rho * _row(w, rho, xp), axis=-1)
 
 
 def moments(rho, edges, ps=(0, 1, 2)):
@@ -70,9 +79,10 @@ def l1_error(rho, rho_ref):
     Returns: dimensionless array (...,) (0 = exact; 2 = disjoint supports).
     References: E_mass in docs/design_notes.md (it is half of this for normalised spectra).
     """
-    rho = jnp.asarray(rho)
-    rho_ref = jnp.asarray(rho_ref)
-    return jnp.sum(jnp.abs(rho - rho_ref), axis=-1) / jnp.sum(rho_ref, axis=-1)
+    xp = _xp(rho, rho_ref)
+    rho = xp.asarray(rho)
+    rho_ref = xp.asarray(rho_ref)
+    return xp.sum(xp.abs(rho - rho_ref), axis=-1) / xp.sum(rho_ref, axis=-1)
 
 
 def mass_peak(rho, edges):
@@ -83,20 +93,22 @@ def mass_peak(rho, edges):
     Returns: (...,) peak mass [g].
     References: thesis §5.3 (peak of m^2 f); Birnstiel et al. (2010).
     """
+    xp = _xp(rho)
     le = _log_edges(edges)
-    lc = jnp.asarray(0.5 * (le[:-1] + le[1:]))
-    dl = jnp.asarray(np.diff(le))
-    rho = jnp.asarray(rho)
-    y = rho / _row(dl, rho)
-    i = jnp.argmax(y, axis=-1)
+    lc = xp.asarray(0.5 * (le[:-1] + le[1:]))
+    dl = xp.asarray(np.diff(le))
+    rho = xp.asarray(rho, np.float64) if xp is np else rho
+    y = rho / _row(dl, rho, xp)
+    i = xp.argmax(y, axis=-1)
     n = y.shape[-1]
-    im, ip = jnp.clip(i - 1, 0, n - 1), jnp.clip(i + 1, 0, n - 1)
-    ly = jnp.log(jnp.maximum(y, 1e-300))
-    take = lambda a, j: jnp.take_along_axis(a, j[..., None], axis=-1)[..., 0]
+    im, ip = xp.clip(i - 1, 0, n - 1), xp.clip(i + 1, 0, n - 1)
+    ly = xp.log(xp.maximum(y, 1e-300))
+    take = lambda a, j: xp.take_along_axis(a, j[..., None], axis=-1)[..., 0]
     y0, ym, yp = take(ly, i), take(ly, im), take(ly, ip)
     den = ym - 2.0 * y0 + yp
-    h = jnp.where((i > 0) & (i < n - 1) & (den < 0), 0.5 * (ym - yp) / jnp.where(den < 0, den, -1.0), 0.0)
-    return jnp.exp(lc[i] + h * dl[i])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = xp.where((i > 0) & (i < n - 1) & (den < 0), 0.5 * (ym - yp) / xp.where(den < 0, den, -1.0), 0.0)
+        return xp.exp(lc[i] + h * dl[i])
 
 
 def m2f(rho, edges):
@@ -106,6 +118,7 @@ def m2f(rho, edges):
     Returns: (..., nbins) [g cm^-3] (m^2 f = m dN/dm m = d rho/d ln m).
     References: Ormel (2008) thesis Figs. 5.3-5.9.
     """
+    xp = _xp(rho)
     le = _log_edges(edges)
-    rho = jnp.asarray(rho)
-    return rho / _row(np.diff(le), rho)
+    rho = xp.asarray(rho, np.float64) if xp is np else rho
+    return rho / _row(np.diff(le), rho, xp)

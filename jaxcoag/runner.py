@@ -31,6 +31,7 @@ import jax.numpy as jnp
 from . import config as cfgmod
 from . import constants as C
 from . import diagnostics
+from . import io
 from ._validate import JaxcoagInputError
 
 __all__ = ["run", "RunResult", "quick_config", "kernel_from_dataset", "summary_rows", "format_summary",
@@ -152,17 +153,17 @@ def frag_limited_size(kernel, st_target, *, m_lo=1e-30, m_hi=1e30):
     lo, hi = np.log(m_lo), np.log(m_hi)
     for _ in range(4):  # bracket width 138 / 1024^4 ~ 1e-10 in ln m
         lm = np.linspace(lo, hi, 1025)
-        st = np.asarray(kernel.particles(jnp.asarray(np.exp(lm))).st, np.float64)
+        _, st = io.grain_size_stokes(kernel, np.exp(lm))
         above = np.nonzero(st >= st_target)[0]
         if above.size == 0 or above[0] == 0:
             return nan
         i = int(above[0])
         lo, hi = lm[i - 1], lm[i]
+        s_lo, s_hi = float(np.log(st[i - 1])), float(np.log(st[i]))
     # final step: interpolate ln St linearly in ln m inside the last bracket
-    s_lo, s_hi = (float(np.log(v)) for v in np.asarray(kernel.particles(jnp.asarray(np.exp([lo, hi]))).st))
     lm = lo + (np.log(st_target) - s_lo) / (s_hi - s_lo) * (hi - lo) if s_hi > s_lo else hi
     m = float(np.exp(lm))
-    return m, float(np.asarray(kernel.particles(jnp.asarray(m)).a))
+    return m, float(io.grain_size_stokes(kernel, m)[0])
 
 
 def summary_rows(ds, kernel):
@@ -172,17 +173,17 @@ def summary_rows(ds, kernel):
     rho = np.asarray(ds["mass_per_bin"].values, np.float64)
     edges = np.asarray(ds["m_edge"].values, np.float64)
     m = np.asarray(ds["m"].values, np.float64)
-    p_all = kernel.particles(jnp.asarray(m))
-    st_all, a_all = np.asarray(p_all.st), np.asarray(p_all.a)
+    mp_all = np.asarray(diagnostics.mass_peak(rho, edges), np.float64)
+    a_both, st_both = io.grain_size_stokes(kernel, np.concatenate([m, mp_all]))  # one call: bins and peaks
+    a_all, st_all, a_mp, st_mp = a_both[:m.size], st_both[:m.size], a_both[m.size:], st_both[m.size:]
     y = rho / np.diff(np.log(edges))
     t = np.asarray(ds["t"].values, np.float64)
     drift = np.asarray(ds["mass_drift"].values, np.float64)
     rows = []
     for i in range(rho.shape[0]):
-        mp = float(diagnostics.mass_peak(rho[i], edges))
-        p = kernel.particles(jnp.asarray(mp))
+        mp = float(mp_all[i])
         sig = y[i] > 1e-3 * y[i].max()
-        rows.append(dict(t_yr=float(t[i]) / C.yr, m_peak=mp, a_peak=float(p.a), st_peak=float(p.st),
+        rows.append(dict(t_yr=float(t[i]) / C.yr, m_peak=mp, a_peak=float(a_mp[i]), st_peak=float(st_mp[i]),
                          st_max=float(st_all[sig].max()) if sig.any() else float("nan"),
                          a_max=float(a_all[sig].max()) if sig.any() else float("nan"), mass_drift=float(drift[i])))
     return rows
@@ -537,7 +538,6 @@ def sweep_config(cfg, params: dict, *, chunk=1, workers=None, quick=False, verbo
     kernel, i.e. its rho_s and gas state), coords ``t`` [s] and ``t_yr`` [yr], and the config.
     The figure path is ``ds.attrs["figure"]`` when one was saved.
     """
-    from . import io
     from . import sweep as swmod
     from ._engine import evolve
     from ._status import RESULT_NAMES

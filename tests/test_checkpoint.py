@@ -160,6 +160,8 @@ def test_binned_checkpointed_run_is_right_and_the_file_holds_every_output(binned
     res, path = binned_full
     assert bool(res.status == jaxcoag.RESULTS.successful)
     np.testing.assert_array_equal(np.asarray(res.t), T_OUT)
+    # the segments' outputs are joined on the host, the result holds JAX arrays as an unsegmented run does
+    assert all(isinstance(getattr(res, k), jax.Array) for k in ("y", "rho", "n", "gel_mass", "mass_drift"))
     # Smoluchowski with a constant kernel: N(t) = N0 / (1 + K N0 t / 2); mass conserved
     np.testing.assert_allclose(np.asarray(res.moments(0)), 1.0 / (1.0 + 0.5 * T_OUT), rtol=1e-4)
     assert np.max(np.abs(np.asarray(res.mass_drift))) < 1e-12

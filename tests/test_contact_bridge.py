@@ -305,9 +305,12 @@ def test_sweep_collisions_small_ice():
     np.testing.assert_array_equal(np.asarray(tab.n_runs), 1.0)
 
 
+@pytest.mark.slow
 def test_sweep_collisions_workers_give_the_same_table():
-    """Collisions run two at a time in host threads give the one-after-another table exactly (each collision has
-    its own key, the averages are summed in one order): 2-D BCCAs of 2 and 4 monomers, 2 structures, 2 speeds."""
+    """(slow: ~35 s; the host-thread workers themselves are checked in the default run by
+    test_sweep.py::test_workers_give_the_single_thread_results.) Collisions run two at a time in host threads give
+    the one-after-another table exactly (each collision has its own key, the averages are summed in one order):
+    2-D BCCAs of 2 and 4 monomers, 2 structures, 2 speeds."""
     v = np.array([0.5, 20.0]) * V0
     kw = dict(n_structures=2, dt=0.112 * float(ICE.t_c), quiet_steps=500)
     one = bridge.sweep_collisions([2, 4], v, ICE, jax.random.PRNGKey(5), **kw)

@@ -66,6 +66,16 @@ def test_time_and_particle_coords():
     np.testing.assert_allclose(pc["St"][1], 1.6 * a / (float(g.rho_g) * float(g.c_g)) / float(g.t_L), rtol=1e-12)
     assert io.particle_coords(kernels.Constant(1.0), m) == {} and io.particle_coords(None, m) == {}
     assert io.particle_coords(K, m, dim="species")["St"][0] == "species"
+    # io.grain_size_stokes (one jitted call on masses padded to GRAIN_BATCH) against the eager particles(),
+    # for any shape, also longer than one batch
+    rng = np.random.default_rng(5)
+    for shape in ((), (3,), (2, 3), (io.GRAIN_BATCH + 1,)):
+        mm = np.exp(rng.uniform(np.log(1e-12), np.log(1e8), shape))
+        ga, gst = io.grain_size_stokes(K, mm)
+        p = K.particles(jnp.asarray(mm))
+        assert ga.shape == gst.shape == np.shape(mm) and isinstance(ga, np.ndarray) and ga.dtype == np.float64
+        np.testing.assert_allclose(ga, np.asarray(p.a), rtol=1e-14)
+        np.testing.assert_allclose(gst, np.asarray(p.st), rtol=1e-13)
 
 
 def test_result_table_is_the_shared_status():

@@ -395,7 +395,8 @@ def test_overlay_writes_equal_sequential_updates():
 
 
 @pytest.mark.parametrize("volume,grouping", [("const_v", "equal_mass"), ("const_ns", "equal_mass"),
-                                             ("const_n", "none"), ("const_v", "distribution")])
+                                             pytest.param("const_n", "none", marks=pytest.mark.slow),
+                                             pytest.param("const_v", "distribution", marks=pytest.mark.slow)])
 def test_event_loop_updates_species_arrays_in_place(volume, grouping):
     """No whole-array copy per event: in the compiled event loop (``run._event`` in a ``fori_loop``) XLA updates
     the species arrays and R in place. A copy of an S-slot array there made the cost per event follow the
@@ -403,7 +404,8 @@ def test_event_loop_updates_species_arrays_in_place(volume, grouping):
     54 us at 150: benchmarks/results/mc_scaling.json); the reads of one array that feed another's update run in
     ``run._opaque_reads``, and from ``run.COND_FREE_CAPACITY`` slots on the event has no lax.cond. Checked on the
     optimised HLO for the four volume/grouping paths (duplication loops included); the capacity 16411 appears in
-    no other shape."""
+    no other shape. (~20 s of compile each: the default run checks the default grouping with and without
+    duplication, ``-m slow`` the other two.)"""
     import re
 
     from jaxcoag.mc.engine import _default_outcome
@@ -438,11 +440,11 @@ def test_event_loop_updates_species_arrays_in_place(volume, grouping):
         np.testing.assert_allclose(M, float(out.M_tot), rtol=1e-12)
 
 
-@pytest.mark.parametrize("volume", ["const_v", "const_ns"])
+@pytest.mark.parametrize("volume", [pytest.param("const_v", marks=pytest.mark.slow), "const_ns"])
 def test_cond_and_cond_free_events_are_the_same(volume):
     """Below ``run.COND_FREE_CAPACITY`` slots the event is a lax.cond, from it on a masked cond-free event (no
     S-slot copy): the same run at capacity 300 and at that capacity gives the same events bit for bit, with
-    duplication (constant Ns) and without."""
+    duplication (constant Ns) and without (~25 s of compile each: the run without duplication is ``-m slow``)."""
     vol = mc.ConstantSpecies() if volume == "const_ns" else mc.ConstantVolume()
     out = []
     for cap in (300, RUN.COND_FREE_CAPACITY):
