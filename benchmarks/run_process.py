@@ -4,7 +4,8 @@ DustPy's own run of the closest box it can express.
 Ours: ``python -m jaxcoag.cli run [--quick] --no-progress --out <tmp>/run.nc`` in a fresh process,
 twice, with ``JAXCOAG_CACHE_DIR`` pointing at an empty temporary directory: the first run ("cold")
 compiles and fills JAX's persistent compilation cache, the second ("warm") loads from it. Wall
-clock of the whole process (interpreter start to exit) from outside; inside, the wrapper records
+clock of the whole process (interpreter start to exit) from outside; the wrapper ends the process as the
+``jaxcoag`` command does (``jaxcoag.cli.exit_now``: flushed output, no interpreter teardown); inside, it records
 the import time of ``jaxcoag.cli`` and the runner prints its split (``jaxcoag.runner.run``'s
 timings: set-up = configuration, kernel and grid build; solve = the evolve call, of which XLA
 compile or cache load and trace + lower; output = dataset, netCDF, figure, summary). The
@@ -68,6 +69,7 @@ rc = cli.main(sys.argv[1:])
 print("RUN_PROCESS_JSON " + json.dumps(dict(rc=rc, import_s=t1 - t0, main_s=time.perf_counter() - t1,
                                             cache_hits=ev.get("/jax/compilation_cache/cache_hits", 0),
                                             cache_writes=ev.get("/jax/compilation_cache/cache_misses", 0))))
+cli.exit_now(rc)  # as the `jaxcoag` command ends (cli.console_main)
 """
 
 _DUSTPY_CHILD = """

@@ -306,5 +306,37 @@ def _report_interrupt(name, argv, args, exc):
         print("run again with: " + shlex.join(["jaxcoag"] + list(argv)), file=sys.stderr)
 
 
+def console_main() -> None:
+    """The ``jaxcoag`` command (and ``python -m jaxcoag.cli``): :func:`main`, then the exit without the
+    interpreter's teardown.
+
+    Everything a command writes is complete when :func:`main` returns (netCDF and checkpoint files are written
+    atomically and closed, temporary directories removed, worker threads joined); what is left is freeing JAX's
+    backend, the compiled programs and every imported module, which took 0.7-0.8 s of a 5-6 s warm ``jaxcoag
+    run`` (0.05 s with this exit; atexit handlers 0.09 s, a final garbage collection 0.14 s, the rest module
+    teardown). So stdout and stderr are flushed, the logging handlers shut down, JAX's pending effects awaited,
+    and the process ends with :func:`os._exit`. Library use (``cli.main(...)`` from Python) is unaffected.
+    """
+    exit_now(main())
+
+
+def exit_now(rc: int) -> None:
+    """End the process with exit code ``rc`` the way the ``jaxcoag`` command does (:func:`console_main`):
+    JAX's pending effects awaited, logging shut down, stdout and stderr flushed, then :func:`os._exit`."""
+    try:
+        jax.effects_barrier()
+    except Exception:  # pragma: no cover - nothing pending to wait for
+        pass
+    import logging
+
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe (e.g. `jaxcoag config | head -1`): nothing left to write
+            rc = rc or 1
+    os._exit(int(rc))
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console_main()

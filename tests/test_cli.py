@@ -209,6 +209,29 @@ def test_config_subcommand_prints_the_default(capsys):
     assert tomllib.loads(resolved)["grid"]["m_min"] == config.default()["grid"]["m_min"]  # written exactly
 
 
+def test_the_command_flushes_its_output_and_keeps_exit_codes(tmp_path):
+    """The ``jaxcoag`` command (``cli.console_main``, also ``python -m jaxcoag.cli``) ends with ``os._exit``
+    after flushing: a piped stdout arrives whole (the default TOML, ~100 lines, parses to the default), a refused
+    input still exits with 2 and its one-line message, and argparse's own exits (--version: 0) are unchanged."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # block-buffered pipes, as usual
+
+    def cli_run(*args):
+        return subprocess.run([sys.executable, "-m", "jaxcoag.cli", *args], capture_output=True, text=True,
+                              cwd=tmp_path, timeout=300, env=env)
+
+    r = cli_run("config")
+    assert r.returncode == 0, r.stderr
+    assert config.loads(r.stdout).data == config.default().data and r.stdout.endswith("\n")
+    assert r.stdout == open(config.default_path()).read()
+    bad = cli_run("run", str(tmp_path / "missing.toml"), "--no-progress")
+    assert bad.returncode == 2 and bad.stderr.startswith("jaxcoag run: error:") and "missing.toml" in bad.stderr
+    v = cli_run("--version")
+    assert v.returncode == 0 and v.stdout.strip()
+
+
 def test_config_engine_mc_prints_a_runnable_grouped_default_of_the_same_scene(capsys):
     assert cli.main(["config", "--engine", "mc"]) == 0
     text = capsys.readouterr().out
