@@ -209,6 +209,28 @@ def test_config_subcommand_prints_the_default(capsys):
     assert tomllib.loads(resolved)["grid"]["m_min"] == config.default()["grid"]["m_min"]  # written exactly
 
 
+def test_run_solves_forward_only_with_the_same_numbers():
+    """``runner.run`` (``jaxcoag run``) solves the binned box with ``diffrax.ForwardMode`` (``runner.forward_only``:
+    a run that nothing differentiates) and gets, to round-off and with the same steps, what the same segments give
+    with the engine's default ``RecursiveCheckpointAdjoint``; an adjoint a user set is kept."""
+    import diffrax
+
+    cfg = runner.quick_config(config.default())
+    b = config.build(cfg)
+    assert b.engine.adjoint is None and isinstance(runner.forward_only(b.engine).adjoint, diffrax.ForwardMode)
+    mine = b.engine.__class__(b.engine.grid, adjoint=diffrax.DirectAdjoint())
+    assert runner.forward_only(mine) is mine
+    res = runner.run(cfg, save=False, progress=False, verbose=False)
+    # the same segments (one per output time, the step size carried) with the default adjoint
+    ref, _ = runner.evolve_saved(b.kernel, b.engine, b.initial, b.t_out, outcome=b.outcome, key=b.key,
+                                 checkpoint=None, every=1, resume=False, progress=False, max_segments=None, save=False)
+    # to round-off: XLA compiles the two loops apart (the default box agreed bit for bit; this quick box has 2 of
+    # 522 entries one ulp apart), the step sequences are the same
+    np.testing.assert_allclose(res.dataset["mass_per_bin"].values, np.asarray(ref.mass_per_bin()), rtol=1e-13, atol=0)
+    assert int(res.result.stats["steps"]) == int(ref.stats["steps"])
+    assert int(res.result.stats["rejected"]) == int(ref.stats["rejected"])
+
+
 def test_the_command_flushes_its_output_and_keeps_exit_codes(tmp_path):
     """The ``jaxcoag`` command (``cli.console_main``, also ``python -m jaxcoag.cli``) ends with ``os._exit``
     after flushing: a piped stdout arrives whole (the default TOML, ~100 lines, parses to the default), a refused
