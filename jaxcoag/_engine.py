@@ -152,6 +152,12 @@ class AbstractEngine(eqx.Module):
     def _result(self, kernel, t, outs, state, outcome):
         """The engine's result from the concatenated outputs and the final state."""
 
+    def _fingerprint_view(self):
+        """The engine as a checkpoint's fingerprint sees it (``checkpoint.run_fingerprint``): everything that decides
+        what a run computes. Engines with options that only decide how a run is differentiated return themselves
+        without them (the binned engine's ``adjoint``), so a checkpoint resumes under another such option."""
+        return self
+
     def _progress_time(self, t: float) -> str:
         """Simulated time ``t`` (in the run's time unit) as the progress bar shows it: years for the engines whose
         times are in s and span astrophysical scales; engines with other units or scales override it."""

@@ -255,8 +255,11 @@ def run_fingerprint(kernel, engine, initial, t_out, *, t0, outcome, key, until=N
     outcome, output times [s] (as float64), t0 [s] and key (structure and numbers), and the
     adaptive-end predicate ``until`` of :func:`run_segments` when there is one (its class and
     fields; without one the fingerprint is that of a run with fixed output times).
-    A checkpoint whose fingerprint differs is refused on resume."""
-    parts = (FORMAT, engine, kernel, initial, outcome, np.asarray(t_out, np.float64),
+    A checkpoint whose fingerprint differs is refused on resume. The engine enters as its
+    ``_fingerprint_view()`` (options that only decide how the run is differentiated left out: the binned
+    engine's adjoint, which ``jaxcoag run`` sets to forward mode, ``runner.forward_only``)."""
+    view = getattr(engine, "_fingerprint_view", None)
+    parts = (FORMAT, engine if view is None else view(), kernel, initial, outcome, np.asarray(t_out, np.float64),
              None if t0 is None else float(t0), key)
     return fingerprint(*parts) if until is None else fingerprint(*parts, ("until", until))
 

@@ -220,6 +220,11 @@ def test_run_solves_forward_only_with_the_same_numbers():
     assert b.engine.adjoint is None and isinstance(runner.forward_only(b.engine).adjoint, diffrax.ForwardMode)
     mine = b.engine.__class__(b.engine.grid, adjoint=diffrax.DirectAdjoint())
     assert runner.forward_only(mine) is mine
+    # a checkpoint's fingerprint leaves the adjoint out (Binned._fingerprint_view): what `jaxcoag run` wrote under
+    # ForwardMode resumes under the default adjoint and the other way round; the numbers still count
+    fp = lambda e: ckmod.run_fingerprint(b.kernel, e, b.initial, b.t_out, t0=0.0, outcome=b.outcome, key=b.key)
+    assert fp(runner.forward_only(b.engine)) == fp(b.engine)
+    assert fp(mine) == fp(b.engine.__class__(b.engine.grid)) != fp(b.engine.__class__(b.engine.grid, rtol=1e-3))
     res = runner.run(cfg, save=False, progress=False, verbose=False)
     # the same segments (one per output time, the step size carried) with the default adjoint
     ref, _ = runner.evolve_saved(b.kernel, b.engine, b.initial, b.t_out, outcome=b.outcome, key=b.key,

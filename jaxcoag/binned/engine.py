@@ -108,6 +108,14 @@ class Binned(AbstractEngine):
         return "binned"
 
     # ------------------------------------------------------------------ protocol
+    def _fingerprint_view(self):
+        """Without the adjoint: it decides how a solve is differentiated, not its steps (checkpoints written by
+        ``jaxcoag run``, which solves forward-only, resume under the default adjoint and the other way round; the
+        numbers then agree to round-off)."""
+        if self.adjoint is None:
+            return self
+        return eqx.tree_at(lambda e: e.adjoint, self, None)
+
     def _n0(self, initial):
         if isinstance(initial, Monodisperse):
             if is_traced(initial.m0) or is_traced(initial.rho_d):
