@@ -347,14 +347,17 @@ class MCResult(AbstractResult):
             ns = int(getattr(kernel, "n_struct", 0))
             valid = np.asarray(self.valid, bool)
             m_safe = np.where(valid, np.asarray(self.m, np.float64), 1.0)
-            if ns == 0:
-                p = kernel.particles(jnp.asarray(m_safe))
+            if ns == 0:  # one jitted call (io.grain_size_stokes), not the eager operations for this shape
+                from ..io import grain_size_stokes
+
+                p_a, p_st = grain_size_stokes(kernel, m_safe)
             else:
                 psi = np.asarray(self.psi, np.float64)[..., :ns]
                 p = kernel.particles(jnp.asarray(m_safe), jnp.asarray(np.where(valid[..., None], psi, 1.0)))
-            extra["a_species"] = (TS, np.where(valid, np.asarray(p.a, np.float64), np.nan),
+                p_a, p_st = p.a, p.st
+            extra["a_species"] = (TS, np.where(valid, np.asarray(p_a, np.float64), np.nan),
                                   {"units": "cm", "long_name": "grain radius of each species slot (NaN on free slots)"})
-            extra["St_species"] = (TS, np.where(valid, np.asarray(p.st, np.float64), np.nan),
+            extra["St_species"] = (TS, np.where(valid, np.asarray(p_st, np.float64), np.nan),
                                    {"units": "1", "long_name": "Stokes number tau_f / t_L of each species slot in the "
                                                                "run's gas (NaN on free slots)"})
         ds = common_dataset(engine="mc", title="jaxcoag grouped Monte Carlo run", t=a(self.t), edges=e,
