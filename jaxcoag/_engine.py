@@ -152,6 +152,12 @@ class AbstractEngine(eqx.Module):
     def _result(self, kernel, t, outs, state, outcome):
         """The engine's result from the concatenated outputs and the final state."""
 
+    def _forward_only(self):
+        """The engine for a run that nothing differentiates (``jaxcoag run``, ``jaxcoag sweep``:
+        ``runner.forward_only``). Engines whose default serves reverse mode return a faster forward-only form
+        with the same steps (the binned engine: ``diffrax.ForwardMode`` for its default adjoint)."""
+        return self
+
     def _fingerprint_view(self):
         """The engine as a checkpoint's fingerprint sees it (``checkpoint.run_fingerprint``): everything that decides
         what a run computes. Engines with options that only decide how a run is differentiated return themselves

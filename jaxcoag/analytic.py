@@ -27,10 +27,14 @@ Malyshkin & Goodman 2001; thesis Fig. 5.7 and §5.3.3).
 from __future__ import annotations
 
 import functools
-
 import importlib
 
 import numpy as np
+
+from ._validate import JaxcoagInputError
+
+__all__ = ["number_density", "mass_per_bin", "number_per_bin", "moments", "gel_fraction",
+           "log_nk", "KINDS", "log_explosion_cdf", "runaway_time_chain"]
 
 
 class _LazyModule:
@@ -54,10 +58,6 @@ def simpson(*args, **kw):
     """``scipy.integrate.simpson`` (imported on first use)."""
     return _integrate.simpson(*args, **kw)
 
-from ._validate import JaxcoagInputError
-
-__all__ = ["number_density", "mass_per_bin", "number_per_bin", "moments", "gel_fraction",
-           "log_nk", "KINDS", "log_explosion_cdf", "runaway_time_chain"]
 
 KINDS = ("constant", "sum", "product")
 _INITIALS = ("monodisperse", "exponential")

@@ -97,6 +97,7 @@ try:  # Python >= 3.11
 except ImportError:  # pragma: no cover - Python 3.10
     import tomli as _toml
 
+import equinox as eqx
 import numpy as np
 import pydantic
 import tomli_w
@@ -1033,17 +1034,10 @@ def check_memory(cfg: RunConfig):
                   fix=fix)
 
 
+@eqx.filter_jit
 def _kernel_matrix(kernel, m):
-    """``kernel.matrix(m)`` in one jitted call (equinox ``filter_jit``, built on first use)."""
-    global _KERNEL_MATRIX_JIT
-    if _KERNEL_MATRIX_JIT is None:
-        import equinox as eqx
-
-        _KERNEL_MATRIX_JIT = eqx.filter_jit(lambda k, mm: k.matrix(mm))
-    return _KERNEL_MATRIX_JIT(kernel, m)
-
-
-_KERNEL_MATRIX_JIT = None
+    """``kernel.matrix(m)`` in one jitted call."""
+    return kernel.matrix(m)
 
 
 def build(cfg: RunConfig) -> Built:

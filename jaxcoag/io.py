@@ -36,6 +36,7 @@ from __future__ import annotations
 import os
 import tempfile
 
+import equinox as eqx
 import numpy as np
 
 from ._validate import JaxcoagInputError
@@ -108,12 +109,10 @@ def particle_coords(kernel, m, dim="m"):
 GRAIN_BATCH = 2048
 
 
+@eqx.filter_jit
 def _grains(kernel, m):
     p = kernel.particles(m)
     return p.a, p.st
-
-
-_grains_jit = None
 
 
 def grain_size_stokes(kernel, m):
@@ -125,12 +124,8 @@ def grain_size_stokes(kernel, m):
     ~0.3-0.5 s per length, which made up a good part of a ``jaxcoag run``'s output phase. Returns two
     float64 numpy arrays of the shape of ``m``.
     """
-    global _grains_jit
-    import equinox as eqx
     import jax.numpy as jnp
 
-    if _grains_jit is None:
-        _grains_jit = eqx.filter_jit(_grains)
     m = np.asarray(m, np.float64)
     flat = m.reshape(-1)
     n = flat.size
@@ -138,7 +133,7 @@ def grain_size_stokes(kernel, m):
         return np.zeros(m.shape), np.zeros(m.shape)
     buf = np.full(-(-n // GRAIN_BATCH) * GRAIN_BATCH, flat[0])
     buf[:n] = flat
-    a, st = _grains_jit(kernel, jnp.asarray(buf))
+    a, st = _grains(kernel, jnp.asarray(buf))
     return (np.asarray(a, np.float64)[:n].reshape(m.shape).copy(),
             np.asarray(st, np.float64)[:n].reshape(m.shape).copy())
 

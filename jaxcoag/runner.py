@@ -416,20 +416,10 @@ def run(cfg=None, *, out=None, checkpoint=None, resume=False, progress=True, fig
 
 
 def forward_only(engine):
-    """The engine for a run that nothing differentiates (``jaxcoag run``, ``jaxcoag sweep``): a binned engine with the default
-    adjoint (``diffrax.RecursiveCheckpointAdjoint``, there for ``jax.grad``) solves with
-    ``diffrax.ForwardMode`` instead, whose plain ``lax.while_loop`` traces, lowers and compiles faster (default
-    box, warm cache: trace + lower 0.8-1.0 s against 1.2-1.6 s, cold XLA compile 3.2 against 3.8 s) with the
-    same steps and the same numbers to round-off (bit for bit on the default box; the two loops are compiled
-    apart). Any other engine, or an adjoint the user chose, is returned unchanged."""
-    from .binned import Binned
-
-    if isinstance(engine, Binned) and engine.adjoint is None:
-        import diffrax
-        import equinox as eqx
-
-        return eqx.tree_at(lambda e: e.adjoint, engine, diffrax.ForwardMode(), is_leaf=lambda x: x is None)
-    return engine
+    """The engine for a run that nothing differentiates (``jaxcoag run``, ``jaxcoag sweep``): its
+    ``_forward_only()`` form (the binned engine with its default adjoint solves with ``diffrax.ForwardMode``:
+    faster to trace and compile, the same steps; any other engine, or an adjoint the user chose, unchanged)."""
+    return engine._forward_only()
 
 
 class CompileClock:
