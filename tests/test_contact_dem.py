@@ -7,6 +7,8 @@ sqrt(2 (6/5) F_c/(delta_0 m_1)) of the pair about delta_0 (eqs. 4-5), exact cons
 check (32 monomers, 1e5 steps) is marked slow.
 """
 
+from types import SimpleNamespace
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -372,3 +374,29 @@ def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
     for k, tol in (("x", 1e-10), ("v", 1e-8), ("E_dis", 1e-10)):
         a, b = np.asarray(getattr(p, k)), np.asarray(getattr(w, k))
         np.testing.assert_allclose(a, b, rtol=0, atol=tol * np.max(np.abs(b)), err_msg=k)
+
+
+def test_small_systems_compile_without_the_task_assigner_and_give_the_same_numbers():
+    """Below ``dem.ASSIGNER_FROM`` monomers the run functions are the copies compiled without XLA's CPU parallel
+    task assigner (it split a step's small fusions over the threads at more cost than gain); the option changes the
+    schedule, not the arithmetic: a 32-monomer thermal cluster (inelastic clipping, contact creation and breaking enabled)
+    advanced 300 steps by both compilations of ``integrate``, and by ``advance_to`` without the pass, ends in the
+    same state bit for bit. Inside a caller's jit the plain copy is used (JAX takes compile options from the
+    top-level jit only)."""
+    st0 = _thermal_cluster(32, jax.random.key(5))
+    big = dem.ASSIGNER_FROM
+    assert dem._compiled(dem._advance_jit, st0) is dem._advance_jit.small
+    assert dem._compiled(dem._advance_jit, SimpleNamespace(x=jnp.zeros((big, 3)))) is dem._advance_jit.large
+    assert dem._compiled(dem._integrate_jit, SimpleNamespace(x=jnp.zeros((big - 1, 3)))) is dem._integrate_jit.small
+    seen = []   # inside a caller's jit: the plain copy (JAX refuses compile options on a nested jit)
+    jax.jit(lambda x: seen.append(dem._compiled(dem._advance_jit, SimpleNamespace(x=x))) or x)(st0.x)
+    assert seen == [dem._advance_jit.large]
+    cfg = dem._Cfg(3, True, False, True)
+    args = (st0, MAT, jnp.asarray(DT), jnp.asarray(0.1))
+    a, b = (getattr(dem._integrate_jit, name)(*args, cfg, 3, 100)[0] for name in ("large", "small"))
+    c = dem._advance_jit.small(*args, jnp.array([150, 300], jnp.int64), cfg)[0]
+    for st in (b, c):   # the other compilation, and the other run function (advance_to) compiled without the pass
+        assert int(a.step) == int(st.step) == 300
+        for f in ("x", "v", "w", "F", "M", "U", "E_dis", "active", "ci", "cj"):
+            np.testing.assert_array_equal(np.asarray(getattr(a, f)), np.asarray(getattr(st, f)), err_msg=f)
+    assert float(np.max(np.abs(np.asarray(a.x) - np.asarray(st0.x)))) > 1e-3 * R1   # the monomers moved

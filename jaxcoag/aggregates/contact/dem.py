@@ -111,7 +111,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._validate import JaxcoagInputError
+from ..._validate import JaxcoagInputError, is_traced
 from .interactions import (_cross, _dot, _norm, clip_inelastic, contact_forces, contact_geometry, rotate_by,
                            rotation_coefficients)
 
@@ -1039,11 +1039,43 @@ def integrate(state: DEMState, mat, n_steps: int, *, dt, inelastic=True, freeze_
     if n_steps < 1 or chunk < 1 or n_steps % chunk:
         raise JaxcoagInputError(f"integrate: n_steps ({n_steps}) must be a positive multiple of chunk ({chunk}).")
     cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts), bool(event_times))
-    return _integrate_jit(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), cfg,
-                          n_steps // chunk, chunk)
+    return _compiled(_integrate_jit, state)(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64),
+                                            cfg, n_steps // chunk, chunk)
 
 
-@functools.partial(jax.jit, static_argnums=(4, 5, 6))
+#: Monomer count below which the DEM's jitted runs (:func:`integrate`, :func:`integrate_until`, :func:`advance_to`)
+#: are compiled without XLA's CPU ``cpu-parallel-task-assigner``. That pass splits large loop fusions over the
+#: host threads; in the step of a few thousand monomers it split hundreds of fusions (230 at N = 2048 in 2-D) too
+#: small for the thread hand-offs to pay. ``dem.integrate``, 2 cores, assigner on against off, us per step
+#: (``benchmarks/cpu_parallelism.py``, 2026-11-28): N = 2048: 320 / 297 (2-D), 373 / 317 (3-D); N = 512: 85 / 88
+#: (2-D), 95 / 98 (3-D), within this machine's noise (another run: 85 / 77); N >= 4096: 1110 / 1180 (3-D 4096),
+#: 1926 / 2127 and 1821 / 2063 (2-D and 3-D 8192), where the split pays. docs/design_notes.md, "One collision's
+#: step and the second CPU core".
+ASSIGNER_FROM = 4096
+_NO_ASSIGNER = {"xla_disable_hlo_passes": "cpu-parallel-task-assigner"}
+
+
+class _Jitted(NamedTuple):
+    """A run function jitted twice: with XLA's default passes (``large``) and without the parallel task assigner
+    (``small``)."""
+    large: object
+    small: object
+
+
+def _with_small(fn, static_argnums):
+    return _Jitted(jax.jit(fn, static_argnums=static_argnums),
+                   jax.jit(fn, static_argnums=static_argnums, compiler_options=_NO_ASSIGNER))
+
+
+def _compiled(jitted: _Jitted, state):
+    """The jitted run function for ``state``: below :data:`ASSIGNER_FROM` monomers the copy compiled without the
+    parallel task assigner (the same computation). Inside a caller's own jit (traced state) the plain copy: JAX
+    takes compile options from the top-level jit only, and refuses them on a nested one."""
+    small = state.x.shape[-2] < ASSIGNER_FROM and not is_traced(state.x)
+    return jitted.small if small else jitted.large
+
+
+@functools.partial(_with_small, static_argnums=(4, 5, 6))
 def _integrate_jit(state, mat, dt, skin, cfg, n_chunks, chunk):
     @jax.checkpoint
     def one_chunk(st):
@@ -1072,11 +1104,11 @@ def integrate_until(state: DEMState, mat, stop, *, dt, max_chunks: int, chunk: i
         entries at and after n_done repeat the final state's), n_done the chunks taken.
     """
     cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts), bool(event_times))
-    return _until_jit(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), stop, cfg,
-                      int(max_chunks), int(chunk))
+    return _compiled(_until_jit, state)(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), stop,
+                                        cfg, int(max_chunks), int(chunk))
 
 
-@functools.partial(jax.jit, static_argnums=(4, 5, 6, 7))
+@functools.partial(_with_small, static_argnums=(4, 5, 6, 7))
 def _until_jit(state, mat, dt, skin, stop, cfg, max_chunks, chunk):
     rec0 = jax.tree_util.tree_map(lambda a: jnp.zeros((max_chunks,) + jnp.shape(a), jnp.asarray(a).dtype),
                                   diagnostics(state, mat))
@@ -1109,11 +1141,11 @@ def advance_to(state: DEMState, mat, target_steps, *, dt, inelastic=True, freeze
     Returns: (state, record with leading axis len(target_steps)).
     """
     cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts), bool(event_times))
-    return _advance_jit(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64),
-                        jnp.asarray(target_steps, jnp.int64), cfg)
+    return _compiled(_advance_jit, state)(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64),
+                                          jnp.asarray(target_steps, jnp.int64), cfg)
 
 
-@functools.partial(jax.jit, static_argnums=(5,))
+@functools.partial(_with_small, static_argnums=(5,))
 def _advance_jit(state, mat, dt, skin, targets, cfg):
     def body(st, target):
         n = jnp.maximum(target - st.step, 0)
