@@ -388,9 +388,19 @@ def test_small_systems_compile_without_the_task_assigner_and_give_the_same_numbe
     assert dem._compiled(dem._advance_jit, st0) is dem._advance_jit.small
     assert dem._compiled(dem._advance_jit, SimpleNamespace(x=jnp.zeros((big, 3)))) is dem._advance_jit.large
     assert dem._compiled(dem._integrate_jit, SimpleNamespace(x=jnp.zeros((big - 1, 3)))) is dem._integrate_jit.small
-    seen = []   # inside a caller's jit: the plain copy (JAX refuses compile options on a nested jit)
+    # under a transformation the plain copy (JAX refuses compile options on a jit it traces through): a caller's jit
+    # with only closure constants, an eager grad and a vmap, each with a traced argument or a trace in progress
+    seen = []
+
+    def probe(*args):
+        seen.append(dem._compiled(dem._integrate_jit, st0, *args))
+        return 0.0
+
+    jax.jit(lambda: probe())()
+    jax.grad(lambda g: probe(MAT, g) + g)(1.0)
+    jax.vmap(lambda g: probe(g) + g)(jnp.ones(2))
     jax.jit(lambda x: seen.append(dem._compiled(dem._advance_jit, SimpleNamespace(x=x))) or x)(st0.x)
-    assert seen == [dem._advance_jit.large]
+    assert seen == [dem._integrate_jit.large] * 3 + [dem._advance_jit.large]
     cfg = dem._Cfg(3, True, False, True)
     args = (st0, MAT, jnp.asarray(DT), jnp.asarray(0.1))
     a, b = (getattr(dem._integrate_jit, name)(*args, cfg, 3, 100)[0] for name in ("large", "small"))

@@ -1039,8 +1039,8 @@ def integrate(state: DEMState, mat, n_steps: int, *, dt, inelastic=True, freeze_
     if n_steps < 1 or chunk < 1 or n_steps % chunk:
         raise JaxcoagInputError(f"integrate: n_steps ({n_steps}) must be a positive multiple of chunk ({chunk}).")
     cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts), bool(event_times))
-    return _compiled(_integrate_jit, state)(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64),
-                                            cfg, n_steps // chunk, chunk)
+    return _compiled(_integrate_jit, state, mat, dt, skin)(state, mat, jnp.asarray(dt, jnp.float64),
+                                                           jnp.asarray(skin, jnp.float64), cfg, n_steps // chunk, chunk)
 
 
 #: Monomer count below which the DEM's jitted runs (:func:`integrate`, :func:`integrate_until`, :func:`advance_to`)
@@ -1067,11 +1067,13 @@ def _with_small(fn, static_argnums):
                    jax.jit(fn, static_argnums=static_argnums, compiler_options=_NO_ASSIGNER))
 
 
-def _compiled(jitted: _Jitted, state):
+def _compiled(jitted: _Jitted, state, *args):
     """The jitted run function for ``state``: below :data:`ASSIGNER_FROM` monomers the copy compiled without the
-    parallel task assigner (the same computation). Inside a caller's own jit (traced state) the plain copy: JAX
-    takes compile options from the top-level jit only, and refuses them on a nested one."""
-    small = state.x.shape[-2] < ASSIGNER_FROM and not is_traced(state.x)
+    parallel task assigner (the same computation). Under any transformation (a caller's jit, grad or vmap: a traced
+    ``state`` or ``args``, or a jit trace in progress, where even a new constant is a tracer) the plain copy: JAX
+    takes compile options from a top-level jit only, and refuses them on a jit it traces through."""
+    small = (state.x.shape[-2] < ASSIGNER_FROM and not is_traced((state, args))
+             and not is_traced(jnp.zeros((), jnp.int32)))
     return jitted.small if small else jitted.large
 
 
@@ -1104,8 +1106,9 @@ def integrate_until(state: DEMState, mat, stop, *, dt, max_chunks: int, chunk: i
         entries at and after n_done repeat the final state's), n_done the chunks taken.
     """
     cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts), bool(event_times))
-    return _compiled(_until_jit, state)(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), stop,
-                                        cfg, int(max_chunks), int(chunk))
+    return _compiled(_until_jit, state, mat, dt, skin)(state, mat, jnp.asarray(dt, jnp.float64),
+                                                       jnp.asarray(skin, jnp.float64), stop, cfg, int(max_chunks),
+                                                       int(chunk))
 
 
 @functools.partial(_with_small, static_argnums=(4, 5, 6, 7))
@@ -1141,8 +1144,9 @@ def advance_to(state: DEMState, mat, target_steps, *, dt, inelastic=True, freeze
     Returns: (state, record with leading axis len(target_steps)).
     """
     cfg = _Cfg(state.dim, bool(inelastic), bool(freeze_contacts), bool(event_times))
-    return _compiled(_advance_jit, state)(state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64),
-                                          jnp.asarray(target_steps, jnp.int64), cfg)
+    return _compiled(_advance_jit, state, mat, dt, skin, target_steps)(
+        state, mat, jnp.asarray(dt, jnp.float64), jnp.asarray(skin, jnp.float64), jnp.asarray(target_steps, jnp.int64),
+        cfg)
 
 
 @functools.partial(_with_small, static_argnums=(5,))
