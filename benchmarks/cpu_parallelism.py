@@ -12,12 +12,13 @@ step, and this script measures what each costs on this machine, in one invocatio
    time T (``dem.integrate`` on the systems of ``contact_throughput.py``, the faster of the two compilations
    below), a perfect two-way split runs a step in at best T/2 + L: the bound on its speed-up is T / (T/2 + L). It
    also reports the largest L that would let the split reach the throughput of LAMMPS on two MPI ranks
-   (``--need-2d``/``--need-3d``: that ratio, from ``results/contact_throughput.json``: 1/0.60 and 1/0.51).
+   (``--need-2d``/``--need-3d``: that ratio, from ``results/contact_throughput_peers.json``: 1/0.669 and 1/0.535).
 2. **The intra-op thread pool** (XLA's ``cpu-parallel-task-assigner`` splits large loop fusions over the threads;
    on by default): ``dem.integrate`` compiled with that pass and without it, on the two systems and on 2-D and
-   3-D pairs of 512 to 8192 monomers (``dem.integrate`` runs the copy without it below ``dem.ASSIGNER_FROM``
-   monomers), and one reduction of exp(sin(x)) over n elements for n = 4 096 ... 1 048 576, the fusion size from
-   which the split pays (``assigner_speedup`` and ``speedup_on_over_off``: us without / us with it; > 1: it helps).
+   3-D pairs of 512 to 8192 monomers (``dem.integrate`` runs the copy without it from ``dem.ASSIGNER_OFF_FROM``
+   to ``dem.ASSIGNER_FROM`` monomers), and one reduction of exp(sin(x)) over n elements for n = 4 096 ...
+   1 048 576, the fusion size from which the split pays (``assigner_speedup`` and ``speedup_on_over_off``: us
+   without / us with it; > 1: it helps).
 
 Run: ``python benchmarks/cpu_parallelism.py [--steps-2d 1000] [--steps-3d 200] [--quick] [--out PATH]``
 (about four minutes, most of it compiling each system's step twice; ``--quick``: the two systems only).
@@ -50,16 +51,12 @@ from jax.sharding import Mesh  # noqa: E402
 from jax.sharding import PartitionSpec as P  # noqa: E402
 
 from benchmarks import _common as C  # noqa: E402
+from jaxcoag.aggregates.contact import dem  # noqa: E402
 
-ASSIGNER_OFF = {"xla_disable_hlo_passes": "cpu-parallel-task-assigner"}
+ASSIGNER_OFF = dem._NO_ASSIGNER
 N_HALF = {2: 256, 3: 1024}
 #: further (dim, monomers per aggregate, steps) for the assigner table, around dem.ASSIGNER_FROM
 SIZES = ((2, 1024, 300), (2, 4096, 100), (3, 256, 1000), (3, 2048, 100), (3, 4096, 50))
-
-
-def _assigner_from():
-    from jaxcoag.aggregates.contact import dem
-    return int(dem.ASSIGNER_FROM)
 
 
 def _best(f, arg, repeats=3):
@@ -95,10 +92,10 @@ def psum_latency(n, iters=2000):
 def dem_step_times(dim, n_half, steps, rounds=2):
     """us per step of ``dem.integrate`` (chunks of 1000 steps) on ``contact_throughput.py``'s head-on BCCA pair of
     2 ``n_half`` monomers, compiled with XLA's default passes (the parallel task assigner on) and without the
-    assigner: the two copies ``dem._integrate_jit.large`` / ``.small`` (``dem.integrate`` runs the second below
-    ``dem.ASSIGNER_FROM`` monomers); ``rounds`` alternations, best of each."""
+    assigner: the two copies ``dem._integrate_jit.large`` / ``.small`` (``dem.integrate`` runs the second from
+    ``dem.ASSIGNER_OFF_FROM`` to ``dem.ASSIGNER_FROM`` monomers); ``rounds`` alternations, best of each."""
     from benchmarks.contact_throughput import DT_TC, V_IMP_V0, _pad3, make_system
-    from jaxcoag.aggregates.contact import dem, materials
+    from jaxcoag.aggregates.contact import materials
 
     mat = materials.ice(r1=1e-5, xi_crit=2e-8)
     x, v = make_system(n_half, dim, mat, V_IMP_V0 * float(mat.v0))
@@ -108,7 +105,7 @@ def dem_step_times(dim, n_half, steps, rounds=2):
     args = (mat, jnp.asarray(DT_TC * float(mat.t_c)), jnp.asarray(0.1), cfg)
     chunk = min(steps, 1000)
     out = dict(system=f"{dim}d {n_half}+{n_half}", n=int(n), steps=steps, default_copy=(
-        "small" if n < dem.ASSIGNER_FROM else "large"))
+        "small" if dem.ASSIGNER_OFF_FROM <= n < dem.ASSIGNER_FROM else "large"))
     fs = {"assigner_on": dem._integrate_jit.large, "assigner_off": dem._integrate_jit.small}
     for _ in range(rounds):   # alternately, best of each (the load of a shared machine comes in bursts)
         for name, f in fs.items():
@@ -136,9 +133,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--steps-2d", type=int, default=1000)
     ap.add_argument("--steps-3d", type=int, default=200)
-    ap.add_argument("--need-2d", type=float, default=1 / 0.60, help="speed-up needed to reach LAMMPS on 2 MPI ranks "
-                    "(2-D 256+256; results/contact_throughput.json, stop 37: ours / LAMMPS 2 ranks = 0.60)")
-    ap.add_argument("--need-3d", type=float, default=1 / 0.51, help="the same for 3-D 1024+1024 (0.51)")
+    ap.add_argument("--need-2d", type=float, default=1 / 0.669, help="speed-up needed to reach LAMMPS on 2 MPI ranks "
+                    "(2-D 256+256; results/contact_throughput_peers.json, stop 43: ours / LAMMPS 2 ranks = 0.669)")
+    ap.add_argument("--need-3d", type=float, default=1 / 0.535, help="the same for 3-D 1024+1024 (0.535)")
     ap.add_argument("--quick", action="store_true", help="skip the table of further system sizes")
     ap.add_argument("--out", default=str(C.RESULTS / "cpu_parallelism.json"))
     a = ap.parse_args(argv)
@@ -172,7 +169,9 @@ def main(argv=None):
     C.print_table(fus, ["n", "us_assigner_on", "us_assigner_off", "speedup_on_over_off"],
                   "one loop fusion of n elements: the parallel task assigner on / off")
     C.write_json(a.out, dict(benchmark="cpu_parallelism", description=__doc__.split("\n\n")[0], dem=rows,
-                             dem_sizes=sizes, assigner_from=_assigner_from(), fusion=fus, xla_flags=os.environ["XLA_FLAGS"], machine=C.machine_info()))
+                             dem_sizes=sizes, assigner_off_for=[int(dem.ASSIGNER_OFF_FROM), int(dem.ASSIGNER_FROM)],
+                             fusion=fus,
+                             xla_flags=os.environ["XLA_FLAGS"], machine=C.machine_info()))
     print(f"wrote {a.out}")
 
 

@@ -377,29 +377,31 @@ def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
 
 
 def test_small_systems_compile_without_the_task_assigner_and_give_the_same_numbers():
-    """Below ``dem.ASSIGNER_FROM`` monomers the run functions are the copies compiled without XLA's CPU parallel
-    task assigner (it split a step's small fusions over the threads at more cost than gain); the option changes the
+    """From ``dem.ASSIGNER_OFF_FROM`` to ``dem.ASSIGNER_FROM`` monomers the run functions are the copies compiled
+    without XLA's CPU parallel task assigner (it split a step's small fusions over the threads at more cost than gain); the option changes the
     schedule, not the arithmetic: a 32-monomer thermal cluster (inelastic clipping, contact creation and breaking enabled)
     advanced 300 steps by both compilations of ``integrate``, and by ``advance_to`` without the pass, ends in the
     same state bit for bit. Inside a caller's jit the plain copy is used (JAX takes compile options from the
     top-level jit only)."""
     st0 = _thermal_cluster(32, jax.random.key(5))
-    big = dem.ASSIGNER_FROM
-    assert dem._compiled(dem._advance_jit, st0) is dem._advance_jit.small
-    assert dem._compiled(dem._advance_jit, SimpleNamespace(x=jnp.zeros((big, 3)))) is dem._advance_jit.large
-    assert dem._compiled(dem._integrate_jit, SimpleNamespace(x=jnp.zeros((big - 1, 3)))) is dem._integrate_jit.small
+    lo, hi = dem.ASSIGNER_OFF_FROM, dem.ASSIGNER_FROM
+    mid = SimpleNamespace(x=jnp.zeros((lo, 3)))   # (only the shape is read)
+    assert dem._compiled(dem._advance_jit, st0) is dem._advance_jit.large
+    assert dem._compiled(dem._advance_jit, mid) is dem._advance_jit.small
+    assert dem._compiled(dem._advance_jit, SimpleNamespace(x=jnp.zeros((hi, 3)))) is dem._advance_jit.large
+    assert dem._compiled(dem._integrate_jit, SimpleNamespace(x=jnp.zeros((hi - 1, 3)))) is dem._integrate_jit.small
     # under a transformation the plain copy (JAX refuses compile options on a jit it traces through): a caller's jit
     # with only closure constants, an eager grad and a vmap, each with a traced argument or a trace in progress
     seen = []
 
     def probe(*args):
-        seen.append(dem._compiled(dem._integrate_jit, st0, *args))
+        seen.append(dem._compiled(dem._integrate_jit, mid, *args))
         return 0.0
 
     jax.jit(lambda: probe())()
     jax.grad(lambda g: probe(MAT, g) + g)(1.0)
     jax.vmap(lambda g: probe(g) + g)(jnp.ones(2))
-    jax.jit(lambda x: seen.append(dem._compiled(dem._advance_jit, SimpleNamespace(x=x))) or x)(st0.x)
+    jax.jit(lambda x: seen.append(dem._compiled(dem._advance_jit, SimpleNamespace(x=x))) or x)(mid.x)
     assert seen == [dem._integrate_jit.large] * 3 + [dem._advance_jit.large]
     cfg = dem._Cfg(3, True, False, True)
     args = (st0, MAT, jnp.asarray(DT), jnp.asarray(0.1))

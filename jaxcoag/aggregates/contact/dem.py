@@ -1043,14 +1043,15 @@ def integrate(state: DEMState, mat, n_steps: int, *, dt, inelastic=True, freeze_
                                                            jnp.asarray(skin, jnp.float64), cfg, n_steps // chunk, chunk)
 
 
-#: Monomer count below which the DEM's jitted runs (:func:`integrate`, :func:`integrate_until`, :func:`advance_to`)
-#: are compiled without XLA's CPU ``cpu-parallel-task-assigner``. That pass splits large loop fusions over the
-#: host threads; in the step of a few thousand monomers it split hundreds of fusions (230 at N = 2048 in 2-D) too
-#: small for the thread hand-offs to pay. ``dem.integrate``, 2 cores, assigner on against off, us per step
-#: (``benchmarks/cpu_parallelism.py``, 2026-11-28): N = 2048: 320 / 297 (2-D), 373 / 317 (3-D); N = 512: 85 / 88
-#: (2-D), 95 / 98 (3-D), within this machine's noise (another run: 85 / 77); N >= 4096: 1110 / 1180 (3-D 4096),
-#: 1926 / 2127 and 1821 / 2063 (2-D and 3-D 8192), where the split pays. docs/design_notes.md, "One collision's
-#: step and the second CPU core".
+#: Monomer counts N, ASSIGNER_OFF_FROM <= N < ASSIGNER_FROM, for which the DEM's jitted runs (:func:`integrate`,
+#: :func:`integrate_until`, :func:`advance_to`) are compiled without XLA's CPU ``cpu-parallel-task-assigner``. That
+#: pass splits large loop fusions over the host threads; in the step of a few thousand monomers it split hundreds of
+#: fusions (230 in the 2-D step of N = 2048) too small for the thread hand-offs to pay. ``dem.integrate``, 2 cores,
+#: assigner on against off, us per step, two runs of ``benchmarks/cpu_parallelism.py`` (2026-11-28): N = 2048:
+#: 320 / 297 and 458 / 284 (2-D), 373 / 317 and 488 / 377 (3-D); N = 512: 85 / 88 and 83 / 83 (2-D), 95 / 98 and
+#: 91 / 97 (3-D); N >= 4096: 1030-1110 / 1051-1180 (3-D 4096), 1827-1926 / 1945-2127 and 1787-1821 / 2063-2109 (2-D
+#: and 3-D 8192), where the split pays. docs/design_notes.md, "One collision's step and the second CPU core".
+ASSIGNER_OFF_FROM = 1024
 ASSIGNER_FROM = 4096
 _NO_ASSIGNER = {"xla_disable_hlo_passes": "cpu-parallel-task-assigner"}
 
@@ -1068,11 +1069,12 @@ def _with_small(fn, static_argnums):
 
 
 def _compiled(jitted: _Jitted, state, *args):
-    """The jitted run function for ``state``: below :data:`ASSIGNER_FROM` monomers the copy compiled without the
-    parallel task assigner (the same computation). Under any transformation (a caller's jit, grad or vmap: a traced
-    ``state`` or ``args``, or a jit trace in progress, where even a new constant is a tracer) the plain copy: JAX
-    takes compile options from a top-level jit only, and refuses them on a jit it traces through."""
-    small = (state.x.shape[-2] < ASSIGNER_FROM and not is_traced((state, args))
+    """The jitted run function for ``state``: from :data:`ASSIGNER_OFF_FROM` to :data:`ASSIGNER_FROM` monomers the
+    copy compiled without the parallel task assigner (the same computation). Under any transformation (a caller's
+    jit, grad or vmap: a traced ``state`` or ``args``, or a jit trace in progress, where even a new constant is a
+    tracer) the plain copy: JAX takes compile options from a top-level jit only, and refuses them on a jit it
+    traces through."""
+    small = (ASSIGNER_OFF_FROM <= state.x.shape[-2] < ASSIGNER_FROM and not is_traced((state, args))
              and not is_traced(jnp.zeros((), jnp.int32)))
     return jitted.small if small else jitted.large
 
