@@ -258,8 +258,7 @@ def run_fingerprint(kernel, engine, initial, t_out, *, t0, outcome, key, until=N
     A checkpoint whose fingerprint differs is refused on resume. The engine enters as its
     ``_fingerprint_view()`` (options that only decide how the run is differentiated left out: the binned
     engine's adjoint, which ``jaxcoag run`` sets to forward mode, ``runner.forward_only``)."""
-    view = getattr(engine, "_fingerprint_view", None)
-    parts = (FORMAT, engine if view is None else view(), kernel, initial, outcome, np.asarray(t_out, np.float64),
+    parts = (FORMAT, engine._fingerprint_view(), kernel, initial, outcome, np.asarray(t_out, np.float64),
              None if t0 is None else float(t0), key)
     return fingerprint(*parts) if until is None else fingerprint(*parts, ("until", until))
 

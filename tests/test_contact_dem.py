@@ -378,11 +378,11 @@ def test_slot_prefix_step_equals_whole_list(monkeypatch, system):
 
 def test_small_systems_compile_without_the_task_assigner_and_give_the_same_numbers():
     """From ``dem.ASSIGNER_OFF_FROM`` to ``dem.ASSIGNER_FROM`` monomers the run functions are the copies compiled
-    without XLA's CPU parallel task assigner (it split a step's small fusions over the threads at more cost than gain); the option changes the
-    schedule, not the arithmetic: a 32-monomer thermal cluster (inelastic clipping, contact creation and breaking enabled)
-    advanced 300 steps by both compilations of ``integrate``, and by ``advance_to`` without the pass, ends in the
-    same state bit for bit. Inside a caller's jit the plain copy is used (JAX takes compile options from the
-    top-level jit only)."""
+    without XLA's CPU parallel task assigner (it split a step's small fusions over the threads at more cost than
+    gain); the option changes the schedule, not the arithmetic: a 32-monomer thermal cluster (inelastic clipping,
+    contact creation and breaking enabled) advanced 300 steps by both compilations of ``integrate``, and by
+    ``advance_to`` without the pass, ends in the same state bit for bit. Under a caller's jit, grad or vmap the plain
+    copy is used (JAX takes compile options from a top-level jit only)."""
     st0 = _thermal_cluster(32, jax.random.key(5))
     lo, hi = dem.ASSIGNER_OFF_FROM, dem.ASSIGNER_FROM
     mid = SimpleNamespace(x=jnp.zeros((lo, 3)))   # (only the shape is read)
