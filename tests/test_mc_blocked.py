@@ -423,21 +423,102 @@ def test_event_loop_updates_species_arrays_in_place(volume, grouping):
     cfg = eng._cfg(cap, st.psi.shape[-1], 2, outcome.n_products)
     p = eng._params(kern, outcome, jnp.array([0.3, 0.6]))
     st = RUN._start(cfg, p, st)
+    cfg_big = RUN._cfg_big(cfg)   # the longer blocks from BIG_BLOCKS_FROM occupied slots on
+    assert cfg_big is not None and cfg_big.block > cfg.block
     loop = jax.jit(lambda s: jax.lax.fori_loop(0, 3, lambda i, s_: RUN._event(cfg, p, s_), s))
-    hlo = loop.lower(st).compile().as_text()
-    comp, copies = None, []
-    for line in hlo.splitlines():
-        if line and not line.startswith(" ") and "(" in line and "{" in line:
-            comp = line.split("(")[0]
-        if re.search(rf"\[{cap}(,\d+)?\]", line) and " copy(" in line and not comp.startswith("ENTRY"):
-            copies.append(line.strip()[:100])
-    assert copies == [], copies
+    loop_big = jax.jit(lambda s: jax.lax.fori_loop(0, 3, lambda i, s_: RUN._event(cfg_big, p, s_), s))
+    for lp in (loop, loop_big):
+        hlo = lp.lower(st).compile().as_text()
+        comp, copies = None, []
+        for line in hlo.splitlines():
+            if line and not line.startswith(" ") and "(" in line and "{" in line:
+                comp = line.split("(")[0]
+            if re.search(rf"\[{cap}(,\d+)?\]", line) and " copy(" in line and not comp.startswith("ENTRY"):
+                copies.append(line.strip()[:100])
+        assert copies == [], copies
     # and the loop runs: 3 events (or fewer if the rate sum asked for maintenance), mass conserved in const_v
     out = loop(st)
     assert 1 <= int(out.n_events - st.n_events) <= 3
     if volume == "const_v":
         M = float(jnp.sum(jnp.where(out.valid, jnp.ldexp(out.w, out.z) * out.m, 0.0)))
         np.testing.assert_allclose(M, float(out.M_tot), rtol=1e-12)
+
+
+@pytest.mark.parametrize("state", ["linear", "heavy", "extreme"])
+def test_update_trigger_figures_equal_the_population_moments(state):
+    """The incremental update returns the maintenance triggers of the new state: ns (valid slots), ln M1 and ln M2
+    (M_k = sum over species of g m^k, g = w 2^z; their ratio is the mass m_p that the constant-Ns controller and
+    the equal-mass rezoom read). On the linear-space path they are linear sums (no exponential per slot), taken
+    only where the state's range bounds every g m^2 below e^(690 - ln S); else the update runs in log space.
+    Checked after each of six events against log-sum-exps of the numpy arrays, on the linear path ("linear"),
+    on a state whose g m^2 would overflow the linear sums although its rate tiles are linear-safe ("heavy": masses
+    near e^340; the whole update then takes the log path, its R bitwise that of the log-space update), and on the
+    state of :func:`_extreme` (log path)."""
+    import dataclasses
+
+    from scipy.special import logsumexp
+
+    cfg = dataclasses.replace(_cfg(), mode="const_ns")
+    cfg_log = dataclasses.replace(cfg, linear_rates=False)
+    st = _state(seed=2)
+    if state == "heavy":
+        st = st._replace(m=st.m * np.exp(320.0), logm=st.logm + 320.0)
+    elif state == "extreme":
+        st = _extreme(st)
+    R, s = _dense(st)
+    st = st._replace(R=R, s=s)
+
+    def event_with(cfg):
+        @jax.jit
+        def event(st, a, b, key):
+            st2, T, Tm, old = RUN._collide(cfg, P, st, a, b, key)
+            rng = RUN._range(cfg, st)
+            return RUN._inc_update(cfg, P, old, st2, T, Tm, True, rng)
+        return event
+
+    event, event_log = event_with(cfg), event_with(cfg_log)
+    rng_ = RUN._range(cfg, st)
+    lgm = np.log(float(rng_.w_max)) + int(rng_.z_max) * np.log(2.0) + 2 * np.log(float(rng_.m_max))
+    assert (lgm < 690 - np.log(S)) == (state == "linear")
+    live = np.flatnonzero(np.asarray(st.valid))
+    rng = np.random.default_rng(4)
+    for k in range(6):
+        a, b = (int(x) for x in rng.choice(live, 2))
+        st_in = st
+        st, (_, l1, l2) = event(st, jnp.int32(a), jnp.int32(b), jax.random.key(k))
+        v, w, z, lm = (np.asarray(getattr(st, n)) for n in ("valid", "w", "z", "logm"))
+        lg = np.log(w[v]) + z[v] * np.log(2.0)
+        assert int(st.ns) == int(v.sum())
+        np.testing.assert_allclose(float(l1), logsumexp(lg + lm[v]), rtol=1e-13, err_msg=f"event {k}")
+        np.testing.assert_allclose(float(l2), logsumexp(lg + 2 * lm[v]), rtol=1e-13, err_msg=f"event {k}")
+        st_log, (_, l1_log, l2_log) = event_log(st_in, jnp.int32(a), jnp.int32(b), jax.random.key(k))
+        if state != "linear":   # the range guard sends the whole update to the log-space passes
+            np.testing.assert_array_equal(np.asarray(st.R), np.asarray(st_log.R))
+            assert (float(l1), float(l2)) == (float(l1_log), float(l2_log))
+        live = np.flatnonzero(v)
+
+
+def test_row_pass_checks_the_round_off_of_the_incremental_rates():
+    """The round-off check of the incremental row sums runs in the event's row pass (rate design B): a row sum
+    below -1e-9 of the sum of |R| stops the event before it happens and asks for a refresh (the next maintenance
+    recomputes R); a smaller negative entry, round-off of a rate sum near 0, weighs 0 in the row pick and the event
+    goes on."""
+    eng = jc.MonteCarlo(grouping=mc.EqualMass(), n_particles=1e30, ns_target=40, f_eps=1e-3, capacity=300)
+    kern = K.Sum(0.5)
+    r = jc.evolve(kern, eng, jc.Monodisperse(1.0, 1.0), jnp.array([0.0, 0.5]), key=jax.random.key(1))
+    outcome = jc.outcomes.Sticking().bind(kern)
+    cfg = eng._cfg(300, 0, 2, outcome.n_products)
+    p = eng._params(kern, outcome, jnp.array([0.5, 5.0]))
+    st = RUN._start(cfg, p, r.final_state)
+    st = jax.jit(lambda s: RUN._maintenance(cfg, p, s))(st)
+    st = st._replace(n_since_refresh=jnp.array(3, jnp.int64))
+    x = int(np.flatnonzero(np.asarray(st.valid))[0])
+    tot = float(jnp.sum(jnp.where(st.valid, jnp.abs(st.R), 0.0)))
+    event = jax.jit(lambda s: RUN._event(cfg, p, s))
+    big = event(st._replace(R=st.R.at[x].set(-1e-6 * tot)))
+    assert int(big.n_events) == int(st.n_events) and bool(big.dirty)
+    small = event(st._replace(R=st.R.at[x].set(-1e-12 * tot)))
+    assert int(small.n_events) == int(st.n_events) + 1 and not bool(small.dirty)
 
 
 @pytest.mark.parametrize("volume", [pytest.param("const_v", marks=pytest.mark.slow), "const_ns"])

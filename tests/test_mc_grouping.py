@@ -83,6 +83,25 @@ def test_sum_kernel_equal_mass_moments(sum_equal_mass):
     np.testing.assert_allclose(np.asarray(res.moments(1.0)), 1.0, rtol=1e-12)
 
 
+def test_sum_kernel_equal_mass_moments_across_the_block_switch(monkeypatch):
+    """From ``run.BIG_BLOCKS_FROM`` occupied slots on the events run with longer blocks (a second event loop,
+    ``run._cfg_big``). With the switch moved to 64 slots (a capacity no other test compiles, so no cached program
+    without the switch is reused) these runs cross it early, and give the sum-kernel moments and the exact mass as
+    the test above."""
+    import sys
+
+    run = sys.modules["jaxcoag.mc.run"]
+    monkeypatch.setattr(run, "BIG_BLOCKS_FROM", 64)
+    res = _ens(K.Sum(0.5), 102, SUM_R, n_particles=1e30, t_out=jnp.asarray(SUM_T), grouping=mc.EqualMass(),
+               ns_target=SUM_NS, f_eps=1e-3, capacity=517)
+    assert _ok(res)
+    assert np.all(np.asarray(res.n_species)[:, -1] > 64)
+    _invariants(res)
+    _check_moments(res, SUM_T, np.exp(-SUM_T / 2), np.exp(SUM_T), bias=0.05)
+    mass = np.sum(np.asarray(res.g) * np.asarray(res.m), axis=-1)
+    np.testing.assert_allclose(mass, 1e30, rtol=1e-12)
+
+
 def test_sum_kernel_equal_mass_mass_per_bin(sum_equal_mass):
     """Ensemble-mean mass per factor-2 bin vs the Golovin (1963) solution (E_mass, docs/design_notes.md)."""
     res = sum_equal_mass

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import grouping as G
-from .rates import _safe_log_w, log_diag_factor, log_kernel_tile, log_rate_tile, n_eps, rate_tile
+from .rates import _safe_log_w, log_diag_factor, log_kernel_tile, log_rate_tile, n_eps, pow2, rate_tile
 from .state import STATUS, MCState, Snapshots
 
 __all__ = ["CapacityWarning", "min_capacity"]
@@ -74,10 +74,12 @@ class _Cfg:
     tail_events: float = 0.0
     # ln G_c of the tail-count refinement of the distribution zoom (grouping.count_nodes); None = off
     count_zoom: float | None = None
-    # species per block of the per-event passes over the active prefix [0, hi) (kernel tiles; the
-    # cheap passes, sums and searches, use 4x this); per-event work is O(hi), independent of the
-    # capacity. 128 was fastest of 64/128/256/512 for Ns* = 2000 (~600 live species) on 2 CPU cores.
+    # species per block of the per-event passes over the active prefix [0, hi) (kernel tiles); per-event work is
+    # O(hi), independent of the capacity. 128 was fastest of 64/128/256/512 for Ns* = 2000 (~600 live species) on
+    # 2 CPU cores; from BIG_BLOCKS_FROM occupied slots on the events use _cfg_big's longer blocks
     block: int = 128
+    # block of the cheap passes (sums and searches); None: 4 x block
+    cheap_block: int | None = None
     # equal-mass scheduled merge above em_merge x Ns* (None: above 0.9 S only)
     em_merge: float | None = 2.0
     # per-event rate tiles in linear space for kernels with ``cheap_linear`` (see _lin_rows); False: log space always
@@ -208,7 +210,7 @@ def _stop(st, cond, flag):
 
 def _B(cfg, cheap=False):
     """Block length of the passes over the active prefix (cheap passes: 4x the kernel-tile block)."""
-    return min(cfg.capacity, cfg.block * (4 if cheap else 1))
+    return min(cfg.capacity, (cfg.cheap_block or 4 * cfg.block) if cheap else cfg.block)
 
 
 def _nblocks(cfg, cheap=False):
@@ -466,7 +468,11 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True, rng=None):
     Returns the updated state; also refreshes ``ns`` (valid slots) and, for the maintenance
     triggers, ``extras`` = (ln max m over valid slots, ln M1, ln M2) of the new state (−inf where
     the run's maintenance rules do not use them: ln max m for distribution grouping only, ln M1/M2
-    for constant-Ns and non-constant-volume equal-mass runs).
+    for constant-Ns and non-constant-volume equal-mass runs). On the linear-space path M1 and M2 are linear
+    sums of w 2^z m and w 2^z m^2 (no exponential per slot: the log-sum-exps had cost ~40 us of a ~180 us event
+    at 3 600 species), taken where the range bounds every term; else the update runs in log space. R's
+    round-off check (a row sum below -1e-9 of the sum of |R| asks for a refresh) runs in the next event's row
+    pass (:func:`_event`): here it was a pass of its own.
     """
     if cfg.rates == "full":  # the next event refreshes everything: only the trigger figures here
         _, ns = _active(st.valid)
@@ -495,8 +501,7 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True, rng=None):
     kern, l2f = p["kernel"], p["log2_feps"]
     s = st.s
     ninf = jnp.array(-jnp.inf)
-    # trigger figures only where the maintenance rules read them (static): the M1/M2 log-sums cost two
-    # exponentials per slot and are not needed in constant-volume runs
+    # trigger figures only where the maintenance rules read them (static): not needed in constant-volume runs
     need_mp = cfg.mode == "const_ns" or (cfg.grouping == "equal_mass" and cfg.mode != "const_v")
     need_lmx = cfg.grouping == "distribution"
 
@@ -577,54 +582,49 @@ def _inc_update(cfg, p, old, st, T, Tmask, do=True, rng=None):
             delta = jnp.where(fresh, jnp.sum(X, axis=0), 0.0)
             return jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) - delta, start, axis=0)
 
-        def body_lin(k, start, idx, fresh, c):   # (the trigger figures and lmax: passed through, see below)
-            R, rowsum, lmax, ns, lmx, l1, l2 = c
+        def body_lin(k, start, idx, fresh, c):   # (lmax: passed through, see below)
+            R, rowsum, lmax, ns, lmx, M1, M2 = c
             X = tile_lin(start, idx, fresh, r_e, d_e, w_e, z_e, v_e)
             delta = jnp.where(fresh & do, jnp.sum(X * f, axis=0), 0.0)
             R = jax.lax.dynamic_update_slice_in_dim(R, _sl(R, start, B) + delta, start, axis=0)
             rowsum = rowsum + jnp.sum(X * f_new, axis=1)
-            return R, rowsum, lmax, ns, lmx, l1, l2
+            # the trigger figures, M1 and M2 as linear sums (no exponential per slot; guard below)
+            live = _sl(valid_n, start, B) & fresh
+            ns = ns + jnp.sum(live).astype(jnp.int32)
+            if need_lmx:
+                lmx = jnp.maximum(lmx, jnp.max(jnp.where(live, _sl(logm_n, start, B), -jnp.inf)))
+            if need_mp:
+                mn_b = _sl(m_n, start, B)
+                gm = jnp.where(live, _sl(w_n, start, B) * pow2(_sl(z_n, start, B)) * mn_b, 0.0)
+                M1, M2 = M1 + jnp.sum(gm), M2 + jnp.sum(gm * mn_b)
+            return R, rowsum, lmax, ns, lmx, M1, M2
 
         # the linear passes, then the log-space passes: one of them runs zero trips. (Not a lax.cond: XLA copied R,
-        # S slots, into and out of the cond's branches on every event.) The linear path's trigger figures come
-        # from the round-off check's pass below; its lmax stays -inf: the guard keeps every linear entry below
-        # e^{s + _LIN_TOP}, under the "over" threshold
-        ok = ok_e & ok_o
-        R, rowsum, _, _, _, _, _ = passes(body_old_lin, body_lin, st.R, ok)
-        out = passes(body_old, body, R, ~ok, (rowsum, ninf, jnp.array(0, jnp.int32), ninf, ninf, ninf))
+        # S slots, into and out of the cond's branches on every event.) The linear path's lmax stays -inf: the
+        # guard keeps every linear entry below e^{s + _LIN_TOP}, under the "over" threshold. Its M1 = sum g m and
+        # M2 = sum g m^2 (g = w 2^z) are linear sums: every term below e^(_LIN_PART - ln S) by the range, z within
+        # pow2's exact range; else the log-space passes run
+        lgm_max = jnp.log(rng.w_max) + rng.z_max.astype(jnp.float64) * LN2 + 2.0 * jnp.log(jnp.maximum(rng.m_max, 1.0))
+        ok_mp = ((lgm_max < _LIN_PART - math.log(cfg.capacity)) & (rng.z_max <= 1000) & (rng.m_min > 0)
+                 if need_mp else True)
+        ok = ok_e & ok_o & ok_mp
+        zero = jnp.array(0.0)
+        R, rowsum, lmax, ns, lmx, M1, M2 = passes(body_old_lin, body_lin, st.R, ok,
+                                                  (jnp.zeros(T.shape, jnp.float64), ninf, jnp.array(0, jnp.int32),
+                                                   ninf, zero, zero))
+        out = passes(body_old, body, R, ~ok, (rowsum, lmax, jnp.array(0, jnp.int32), ninf, ninf, ninf))
+        if need_mp:   # ln M1, ln M2 of the linear path (M > 0: there is a live slot; else -inf, as the log sums)
+            l1_lin = jnp.where(M1 > 0, jnp.log(jnp.where(M1 > 0, M1, 1.0)), -jnp.inf)
+            l2_lin = jnp.where(M2 > 0, jnp.log(jnp.where(M2 > 0, M2, 1.0)), -jnp.inf)
+            out = out[:3] + tuple(jnp.where(ok, a_, b_) for a_, b_ in zip((ns, lmx, l1_lin, l2_lin), out[3:]))
+        else:
+            out = out[:3] + tuple(jnp.where(ok, a_, b_) for a_, b_ in zip((ns, lmx), out[3:5])) + out[5:]
     R, rowsum, lmax, ns, lmx, l1, l2 = out
     R = R.at[jnp.where(do, T, cfg.capacity)].set(rowsum, mode="drop")
 
-    # round-off check over the updated slots outside T (read only), then the clamp of the round-off negatives
-    # (R read only by its own update), in blocks of 4B. The clamp pass runs only where the check found a
-    # negative entry (the rest is then unchanged): besides saving the pass, this orders the check's reads of R
-    # before the clamp's writes; unordered, XLA copied R (S slots) on every event
-    Bc = _B(cfg, True)
-
-    def check(k, start, idx, fresh, c):
-        tot, rmin, sts = c
-        Rb = _sl(R, start, Bc)
-        chk = fresh & ~jnp.any(idx[:, None] == T[None, :], axis=1)
-        if sts is not None:   # linear-space tiles: the trigger figures here, in blocks of 4B (fewer loop trips)
-            sts = stats(_sl(valid_n, start, Bc) & fresh, _sl(logm_n, start, Bc), _sl(w_n, start, Bc),
-                        _sl(z_n, start, Bc), *sts)
-        return (tot + jnp.sum(jnp.where(chk & jnp.isfinite(Rb), jnp.abs(Rb), 0.0)),
-                jnp.minimum(rmin, jnp.min(jnp.where(chk, Rb, jnp.inf))), sts)
-
-    sts0 = None if kern_lin is None else (jnp.array(0, jnp.int32), ninf, ninf, ninf)
-    tot, rmin, sts = _fold(cfg, st.hi, check, (jnp.array(0.0), jnp.array(jnp.inf), sts0), cheap=True)
-    if sts is not None:
-        ns, lmx, l1, l2 = (jnp.where(ok, a_, b_) for a_, b_ in zip(sts, (ns, lmx, l1, l2)))
-
-    def clamp(k, start, idx, fresh, R):
-        Rb = _sl(R, start, Bc)
-        return jax.lax.dynamic_update_slice_in_dim(R, jnp.where(fresh, jnp.maximum(Rb, 0.0), Rb), start, axis=0)
-
-    R = _fold(cfg, jnp.where(do & (rmin < 0), st.hi, 0), clamp, R, cheap=True)
-    tot = tot + jnp.sum(jnp.where(jnp.isfinite(rowsum), rowsum, 0.0))
-    neg = rmin < -1e-9 * tot
+    # (the round-off check of R, its negative entries, runs in the next event's row pass: _event)
     over = lmax - s > 600.0
-    return st._replace(R=R, dirty=st.dirty | neg | over, ns=ns), (lmx, l1, l2)
+    return st._replace(R=R, dirty=st.dirty | over, ns=ns), (lmx, l1, l2)
 
 
 # ----------------------------------------------------------------------------- event
@@ -959,16 +959,30 @@ def _event(cfg, p, st):
     u = jax.random.uniform(ku, (7,), dtype=st.w.dtype)
     Bc = _B(cfg, True)
     lin = _lin_kernel(cfg, p) is not None
-    # (with linear-space tiles the row pass also takes the range of the state that their guard reads)
-    a, total, *racc = _pick_blocked(cfg, st.hi, lambda start, idx: _sl(st.R, start, Bc), u[1], u[2],
-                                    _range_block(cfg, st) if lin else None)
-    rng = _Range(*racc[0]) if lin else None
+    # The row pass also checks the round-off of the incremental updates (rate design B): the sum of |R| and the
+    # smallest entry; an entry below -1e-9 of the sum asks for a refresh before the event (a negative entry
+    # within that, round-off of a rate sum near 0, weighs 0 in the pick and stays in R until the refresh). With
+    # linear-space tiles it also takes the range of the state that their guard reads.
+    rfn, rinit = _range_block(cfg, st) if lin else (None, ())
+
+    def extra(start, fresh, c):
+        tot, rmin, *rc = c
+        Rb = _sl(st.R, start, Bc)
+        live = fresh & _sl(st.valid, start, Bc)
+        tot = tot + jnp.sum(jnp.where(live & jnp.isfinite(Rb), jnp.abs(Rb), 0.0))
+        rmin = jnp.minimum(rmin, jnp.min(jnp.where(live, Rb, jnp.inf)))
+        return (tot, rmin) + (tuple(rfn(start, fresh, tuple(rc))) if lin else ())
+
+    a, total, (tot, rmin, *racc) = _pick_blocked(cfg, st.hi, lambda start, idx: jnp.maximum(_sl(st.R, start, Bc), 0.0),
+                                                 u[1], u[2], (extra, (jnp.array(0.0), jnp.array(jnp.inf)) + rinit))
+    rng = _Range(*racc) if lin else None
     fresh = st.n_since_refresh == 0
     nonfinite = ~jnp.isfinite(total)
     zero = ~nonfinite & ((total <= 0) | (st.ns == 0))
     tiny = ~nonfinite & (total < 1e-100)
+    neg = rmin < -1e-9 * tot
 
-    proceed = ~nonfinite & ~zero & ~(tiny & ~fresh)
+    proceed = ~nonfinite & ~zero & ~(tiny & ~fresh) & ~neg
     log_lam = jnp.log(jnp.where(proceed, total, 1.0)) + st.s - st.logV
     E = -jnp.log1p(-u[0])  # Exp(1)
     t_new = st.t + E * jnp.exp(-log_lam)
@@ -1355,6 +1369,22 @@ def _start(cfg: _Cfg, p: dict, st: MCState):
     return st
 
 
+#: Occupied slots (hi) from which the events run with longer blocks (``_cfg_big``): 512-slot kernel tiles and
+#: 1024-slot sums and searches instead of 128 and 512. Measured on 2 CPU cores (issue-17 goal run: constant Ns,
+#: Ns* = 2000, sum kernel, to t = 20, up to ~3 900 species; docs/design_notes.md): 129-137 us per event with the longer
+#: blocks throughout against 148-161 us with the short ones; but runs that hold a few hundred species lost with them
+#: (Ns* = 100-1000 to t = 5: 31-43 against 26-34 us per event), hence the switch by the occupied prefix.
+BIG_BLOCKS_FROM = 2048
+
+
+def _cfg_big(cfg):
+    """The configuration of the events from BIG_BLOCKS_FROM occupied slots on (None where the capacity never gets
+    there, or the blocks are already at least as long)."""
+    if cfg.capacity <= BIG_BLOCKS_FROM or cfg.block >= 512:
+        return None
+    return dataclasses.replace(cfg, block=512, cheap_block=1024)
+
+
 def _simulate(cfg: _Cfg, p: dict, st: MCState):
     """Advance ``st`` (snapshot-free state) over the output times ``p["t_out"]``.
 
@@ -1363,15 +1393,25 @@ def _simulate(cfg: _Cfg, p: dict, st: MCState):
     snapshots of a halted run repeat its final state.
     """
     st = _start(cfg, p, st)
+    cfg_big = _cfg_big(cfg)
 
     def inner_cond(s):
         return ~s.done & ~s.dirty
+
+    def events(cfg_e, cond):
+        return lambda s: jax.lax.while_loop(cond, lambda s_: _check_stop(cfg_e, p, s_, _event(cfg_e, p, s_)), s)
 
     def outer_body(s):
         # maintenance only when due (always true here except right after a continuation, where a
         # refresh would change R and break bitwise equality with the uninterrupted run)
         s = jax.lax.cond(s.dirty, lambda s_: _maintenance(cfg, p, s_), lambda s_: s_, s)
-        return jax.lax.while_loop(inner_cond, lambda s_: _check_stop(cfg, p, s_, _event(cfg, p, s_)), s)
+        if cfg_big is None:
+            return events(cfg, inner_cond)(s)
+        # the events while fewer than BIG_BLOCKS_FROM slots are in use, then (hi only grows between maintenances)
+        # with the longer blocks of cfg_big; one of the two loops often runs zero trips. Two loops in sequence, not
+        # a lax.cond (that copied the species arrays and snapshot buffers in and out of its branches)
+        s = events(cfg, lambda s_: inner_cond(s_) & (s_.hi < BIG_BLOCKS_FROM))(s)
+        return events(cfg_big, inner_cond)(s)
 
     st = jax.lax.while_loop(lambda s: ~s.done, outer_body, st)
     st = _fill(cfg, p, st, jnp.inf)  # remaining snapshots repeat the final state (exact for ZERO_RATE)
