@@ -72,6 +72,22 @@ def _dense(st):
     return row_sums(L)
 
 
+def _with_dense(st):
+    """The state with its dense row sums (R, s)."""
+    R, s = _dense(st)
+    return st._replace(R=R, s=s)
+
+
+def _update_event(cfg):
+    """Jitted executed event on the pair (a, b): ``run._collide``, then ``run._inc_update`` with the pre-event
+    range (as the event loop passes it); returns (state, (ln max m, ln M1, ln M2))."""
+    @jax.jit
+    def event(st, a, b, key):
+        st2, T, Tm, old = RUN._collide(cfg, P, st, a, b, key)
+        return RUN._inc_update(cfg, P, old, st2, T, Tm, True, RUN._range(cfg, st))
+    return event
+
+
 @pytest.mark.parametrize("scale", [0.0, 30.0])
 def test_blocked_refresh_equals_dense_row_sums(scale):
     """The blocked refresh (upper triangle of tiles) against the dense row sums, with its linear-space tiles
@@ -115,21 +131,9 @@ def test_blocked_incremental_update_after_events_equals_refresh(linear):
     log-space update (bitwise; mutation-checked: with the guard forced open the R arrays differ).""" 
     cfg = _cfg(linear=bool(linear))
     st = _state(seed=1)
-    if linear == "extreme":
-        st = _extreme(st)
-    R, s = _dense(st)
-    st = st._replace(R=R, s=s)
-
-    def event_with(cfg):
-        @jax.jit
-        def event(st, a, b, key):
-            st2, T, Tm, old = RUN._collide(cfg, P, st, a, b, key)
-            st2, _ = RUN._inc_update(cfg, P, old, st2, T, Tm)
-            return st2
-        return event
-
-    event = event_with(cfg)
-    event_log = event_with(_cfg(linear=False)) if linear == "extreme" else None
+    st = _with_dense(_extreme(st) if linear == "extreme" else st)
+    event = _update_event(cfg)
+    event_log = _update_event(_cfg(linear=False)) if linear == "extreme" else None
 
     dense = jax.jit(_dense)
     live = np.flatnonzero(np.asarray(st.valid))
@@ -146,10 +150,10 @@ def test_blocked_incremental_update_after_events_equals_refresh(linear):
             continue
         w0, z0 = np.asarray(st.w), np.asarray(st.z)
         st_in = st
-        st = event(st, jnp.int32(a), jnp.int32(b), jax.random.key(k))
+        st = event(st, jnp.int32(a), jnp.int32(b), jax.random.key(k))[0]
         if event_log is not None:   # the range guard rejects the linear tiles: the log-space update, bitwise
             np.testing.assert_array_equal(np.asarray(st.R), np.asarray(event_log(st_in, jnp.int32(a), jnp.int32(b),
-                                                                                 jax.random.key(k)).R))
+                                                                                 jax.random.key(k))[0].R))
         w1, z1, v1 = np.asarray(st.w), np.asarray(st.z), np.asarray(st.valid)
         for t in {a, b}:   # the donors: which way _inc_update took their old rates
             if v[t] and v1[t]:
@@ -465,18 +469,8 @@ def test_update_trigger_figures_equal_the_population_moments(state):
         st = st._replace(m=st.m * np.exp(320.0), logm=st.logm + 320.0)
     elif state == "extreme":
         st = _extreme(st)
-    R, s = _dense(st)
-    st = st._replace(R=R, s=s)
-
-    def event_with(cfg):
-        @jax.jit
-        def event(st, a, b, key):
-            st2, T, Tm, old = RUN._collide(cfg, P, st, a, b, key)
-            rng = RUN._range(cfg, st)
-            return RUN._inc_update(cfg, P, old, st2, T, Tm, True, rng)
-        return event
-
-    event, event_log = event_with(cfg), event_with(cfg_log)
+    st = _with_dense(st)
+    event, event_log = _update_event(cfg), _update_event(cfg_log)
     rng_ = RUN._range(cfg, st)
     lgm = np.log(float(rng_.w_max)) + int(rng_.z_max) * np.log(2.0) + 2 * np.log(float(rng_.m_max))
     assert (lgm < 690 - np.log(S)) == (state == "linear")
