@@ -209,7 +209,8 @@ def _stop(st, cond, flag):
 
 
 def _B(cfg, cheap=False):
-    """Block length of the passes over the active prefix (cheap passes: 4x the kernel-tile block)."""
+    """Block length of the passes over the active prefix (cheap passes: ``cfg.cheap_block``, default 4x the kernel-tile
+    block)."""
     return min(cfg.capacity, (cfg.cheap_block or 4 * cfg.block) if cheap else cfg.block)
 
 
