@@ -487,8 +487,8 @@ def test_update_trigger_figures_equal_the_population_moments(state):
         assert int(st.ns) == int(v.sum())
         np.testing.assert_allclose(float(l1), logsumexp(lg + lm[v]), rtol=1e-13, err_msg=f"event {k}")
         np.testing.assert_allclose(float(l2), logsumexp(lg + 2 * lm[v]), rtol=1e-13, err_msg=f"event {k}")
-        st_log, (_, l1_log, l2_log) = event_log(st_in, jnp.int32(a), jnp.int32(b), jax.random.key(k))
         if state != "linear":   # the range guard sends the whole update to the log-space passes
+            st_log, (_, l1_log, l2_log) = event_log(st_in, jnp.int32(a), jnp.int32(b), jax.random.key(k))
             np.testing.assert_array_equal(np.asarray(st.R), np.asarray(st_log.R))
             assert (float(l1), float(l2)) == (float(l1_log), float(l2_log))
         live = np.flatnonzero(v)
