@@ -87,11 +87,14 @@ def test_sum_kernel_equal_mass_moments_across_the_block_switch(monkeypatch):
     """From ``run.BIG_BLOCKS_FROM`` occupied slots on the events run with longer blocks (a second event loop,
     ``run._cfg_big``). With the switch moved to 64 slots (a capacity no other test compiles, so no cached program
     without the switch is reused) these runs cross it early, and give the sum-kernel moments and the exact mass as
-    the test above."""
+    the test above. The long blocks are shortened to 256 / 512 slots, so that the long-block loop also runs several
+    blocks with a clamped last one (its 2048-slot default would cover the 517 slots in one)."""
     import sys
 
     run = sys.modules["jaxcoag.mc.run"]
     monkeypatch.setattr(run, "BIG_BLOCKS_FROM", 64)
+    monkeypatch.setattr(run, "BIG_BLOCK", 256)
+    monkeypatch.setattr(run, "BIG_CHEAP_BLOCK", 512)
     res = _ens(K.Sum(0.5), 102, SUM_R, n_particles=1e30, t_out=jnp.asarray(SUM_T), grouping=mc.EqualMass(),
                ns_target=SUM_NS, f_eps=1e-3, capacity=517)
     assert _ok(res)

@@ -36,6 +36,33 @@ __all__ = ["n_eps", "log_kernel_tile", "log_rate_tile", "log_diag_factor", "pow2
 LN2 = 0.6931471805599453
 
 
+def _eps_terms(z, logm, log2_feps, rounding: str = "ceil"):
+    """Per-slot terms of N_eps: (z as float, log2 m, q = z + log2 m − log2 f_eps ∓ 1e-9) (see :func:`_zoom_exp`)."""
+    if rounding not in ("ceil", "floor"):  # pragma: no cover - validated by MonteCarlo(...)
+        raise ValueError(f"unknown neps_rounding {rounding!r}")
+    zf = z.astype(logm.dtype)
+    l2 = logm / LN2
+    return zf, l2, ((zf + l2) - log2_feps) + (-1e-9 if rounding == "ceil" else 1e-9)
+
+
+def _zoom_exp(ta, tb, rounding: str = "ceil"):
+    """E = min(z_a, z_b) + N_eps(a, b) as an integer-valued float, from the per-slot terms ta, tb of
+    :func:`_eps_terms` (broadcast); also returns min(z_a, z_b) (float) and a_low = z_a <= z_b.
+
+    With i the lower-zoom member, E = clip(⌈q_j − log2 m_i⌉, z_i, z_j) = z_i + clip(⌈x⌉, 0, z_j − z_i), x the
+    argument of :func:`n_eps`: one subtraction, one rounding and two clips per pair, all in floating point
+    (the int conversions of the pair loop cost ~0.4 ns of a ~1.5 ns linear rate entry). Every user of N_eps (the
+    rate tiles and the event, ``run._collide``) takes it from here, so they agree bitwise.
+    """
+    zfa, l2a, qa = ta
+    zfb, l2b, qb = tb
+    a_low = zfa <= zfb
+    x = jnp.where(a_low, qb, qa) - jnp.where(a_low, l2a, l2b)
+    n = jnp.ceil(x) if rounding == "ceil" else jnp.floor(x)
+    zmin = jnp.minimum(zfa, zfb)
+    return jnp.minimum(jnp.maximum(n, zmin), jnp.maximum(zfa, zfb)), zmin, a_low
+
+
 def n_eps(z_a, z_b, logm_a, logm_b, log2_feps, rounding: str = "ceil"):
     """Group splitting factor N_eps of a pair (symmetric in a, b).
 
@@ -47,24 +74,15 @@ def n_eps(z_a, z_b, logm_a, logm_b, log2_feps, rounding: str = "ceil"):
 
     Returns:
         int32 N_eps = clip(round(x), 0, |z_a − z_b|), with x = (z_j − z_i) + log2 m_j − log2 m_i
-        − log2 f_eps and i the lower-zoom member (N_eps = 0 for equal zooms).
+        − log2 f_eps and i the lower-zoom member (N_eps = 0 for equal zooms); "ceil" rounds x − 1e-9 up,
+        "floor" x + 1e-9 down (x within round-off of an integer rounds to it).
 
     References: Ormel (2008) eq. (5.12)/(5.32) (ceil rounding, capped at z_j - z_i:
     Ormel & Spaans (2008) errata in docs/design_notes.md).
     """
-    a_low = z_a <= z_b
-    dz = jnp.abs(z_a - z_b)
-    logm_i = jnp.where(a_low, logm_a, logm_b)
-    logm_j = jnp.where(a_low, logm_b, logm_a)
-    x = dz.astype(logm_a.dtype) + (logm_j - logm_i) / LN2 - log2_feps
-    if rounding == "ceil":
-        n = jnp.ceil(x - 1e-9)
-    elif rounding == "floor":
-        n = jnp.floor(x + 1e-9)
-    else:  # pragma: no cover - validated by MonteCarlo(...)
-        raise ValueError(f"unknown neps_rounding {rounding!r}")
-    n = jnp.clip(n, 0.0, dz.astype(x.dtype))
-    return n.astype(jnp.int32)
+    E, zmin, _ = _zoom_exp(_eps_terms(z_a, logm_a, log2_feps, rounding), _eps_terms(z_b, logm_b, log2_feps, rounding),
+                           rounding)
+    return (E - zmin).astype(jnp.int32)
 
 
 def _log_kernel(kernel, logm1, logm2, psi1, psi2):
@@ -111,24 +129,18 @@ def log_rate_tile(logK, ia, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, val
 
     References: Ormel (2008) eqs. (5.7), (5.13), (5.31); see :func:`log_rate_row`.
     """
-    dt = logK.dtype
-    za = z_a[:, None]
-    zb = z_b[None, :]
-    la = logm_a[:, None]
-    lb = logm_b[None, :]
-    ne = n_eps(za, zb, la, lb, log2_feps, rounding)
+    ta = tuple(t[:, None] for t in _eps_terms(z_a, logm_a, log2_feps, rounding))
+    E, zmin, a_low = _zoom_exp(ta, tuple(t[None, :] for t in _eps_terms(z_b, logm_b, log2_feps, rounding)), rounding)
     lwa = (_safe_log_w(w_a) if lw_a is None else lw_a)[:, None]
     lw = (_safe_log_w(w_b) if lw_b is None else lw_b)[None, :]
-    zmin = jnp.minimum(za, zb)
     # event fraction phi (see the module docstring and run._collide): the lower-zoom member i gives
     # one group, the other 2^-N_eps groups (N_eps = 0 for equal zooms, so the roles do not matter
     # there); a donor holding less (0 < w < 1 at z = 0) joins with the fraction it has, at a rate
     # divided by that fraction (ln phi = 0 for whole groups, the rate is then unchanged bitwise)
-    ne_ln2 = ne.astype(dt) * LN2
-    a_low = za <= zb
+    ne_ln2 = (E - zmin) * LN2
     lphi = jnp.minimum(0.0, jnp.minimum(jnp.where(a_low, lwa, lwa + ne_ln2), jnp.where(a_low, lw + ne_ln2, lw)))
     lphi = jnp.where(jnp.isfinite(lphi), lphi, 0.0)
-    a_off = lwa + lw + (zmin + ne).astype(dt) * LN2
+    a_off = lwa + lw + E * LN2
     # diagonal (per a); the barrier makes XLA compute its log/expm1 once per row, not fused into every entry
     dg = jax.lax.optimization_barrier(log_diag_factor(w_a, z_a, lwa[:, 0])[:, None])
     # ln K enters once, after the selects: a select with ln K (or anything computed from it) as an operand
@@ -170,6 +182,14 @@ def pow2(k):
     return jax.lax.bitcast_convert_type(e, jnp.float64)
 
 
+def _pow2_float(y):
+    """2^y as float64, exactly, for an integer-valued float64 y in [-1022, 1023] (the caller guarantees it): y + 1023
+    lands in the low mantissa bits of y + (1023 + 2^52), which a shift moves into the exponent field. No
+    float-to-int conversion (that cost more than the rest of the linear rate entry's zoom factor)."""
+    b = jax.lax.bitcast_convert_type(y + (1023.0 + 2.0 ** 52), jnp.int64)
+    return jax.lax.bitcast_convert_type(b << 52, jnp.float64)
+
+
 def rate_tile(K, ia, r_a, d_a, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, valid_b, log2_feps, rounding="ceil"):
     """Λ'_ab e^{−s} for the pairs of A x B in linear space, from linear kernel values: shape (nA, nB).
 
@@ -179,6 +199,9 @@ def rate_tile(K, ia, r_a, d_a, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, 
         off the diagonal  K_ab · r_a · w_b 2^{min(z_a, z_b) + N_eps} / φ_ab,   r_a = ½ w_a e^{−s}
         on the diagonal   K_aa · d_a,                                           d_a = e^{ln diag_a − s}
 
+    with 1/φ = max(1, 1/w_i, 2^{−N_eps}/w_j) = max(c_i, c_j 2^{−N_eps}), c = max(1, 1/w) per slot (i the
+    lower-zoom member): no division per entry.
+
     Arguments:
         K: (nA, nB) kernel values [cm^3 s^-1] (the kernel's ``__call__`` on the linear masses).
         ia, ib: slot indices (ia == ib marks the diagonal).
@@ -186,20 +209,18 @@ def rate_tile(K, ia, r_a, d_a, logm_a, w_a, z_a, valid_a, ib, logm_b, w_b, z_b, 
         logm_*, w_*, z_*, valid_*: species arrays of A and B (logm for N_eps only).
         log2_feps, rounding: as :func:`n_eps`.
 
-    The caller guarantees the range: every partial product r_a w_b 2^k / φ within [e^{-690}, e^{690}]
-    (the Monte Carlo loop checks bounds of the state before it takes this path; otherwise it uses
-    :func:`log_rate_tile`).
+    The caller guarantees the range: every partial product r_a w_b 2^k / φ within [e^{-690}, e^{690}] and
+    every zoom number at most 1000 (the Monte Carlo loop checks bounds of the state before it takes this path;
+    otherwise it uses :func:`log_rate_tile`).
 
     References: Ormel (2008) eqs. (5.7), (5.13), (5.31).
     """
-    za, zb = z_a[:, None], z_b[None, :]
-    ne = n_eps(za, zb, logm_a[:, None], logm_b[None, :], log2_feps, rounding)
-    wa, wb = w_a[:, None], w_b[None, :]
-    a_low = za <= zb
-    p2ne = pow2(ne)
-    phi = jnp.minimum(1.0, jnp.minimum(jnp.where(a_low, wa, wa * p2ne), jnp.where(a_low, wb * p2ne, wb)))
-    phi = jnp.where(phi > 0, phi, 1.0)
-    off = (r_a[:, None] * wb) * pow2(jnp.minimum(za, zb) + ne) / phi
+    E, zmin, a_low = _zoom_exp(tuple(t[:, None] for t in _eps_terms(z_a, logm_a, log2_feps, rounding)),
+                               tuple(t[None, :] for t in _eps_terms(z_b, logm_b, log2_feps, rounding)), rounding)
+    ca = jnp.where(w_a > 0, jnp.maximum(1.0, 1.0 / jnp.where(w_a > 0, w_a, 1.0)), 1.0)[:, None]
+    cb = jnp.where(w_b > 0, jnp.maximum(1.0, 1.0 / jnp.where(w_b > 0, w_b, 1.0)), 1.0)[None, :]
+    inv_phi = jnp.maximum(jnp.where(a_low, ca, cb), jnp.where(a_low, cb, ca) * _pow2_float(zmin - E))
+    off = (r_a[:, None] * w_b[None, :]) * _pow2_float(E) * inv_phi
     on = ia[:, None] == ib[None, :]
     f = jnp.where(on, d_a[:, None], off)
     return (f * jnp.where(valid_a[:, None] & valid_b[None, :], 1.0, 0.0)) * K

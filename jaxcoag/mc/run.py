@@ -359,7 +359,8 @@ def _lin_rows(kern, rng, lw, w, z, logm, valid, s_row):
     partial product r_a w_b 2^k / φ lies in [r_a w_min, r_a w_max 2^{max z} / φ_min]; K(m_a, m_b) <=
     K(m_a, m_max) (``cheap_linear`` kernels are non-decreasing in each mass). With the partial products
     normal, an entry is exact to a few ulp; entries below the smallest normal number are < 1e-308 of the
-    largest row sum (the log path underflows there too)."""
+    largest row sum (the log path underflows there too). Zoom numbers above 1000 take the log path (the tile's
+    powers of 2 are exact only up to 2^1023)."""
     dt = jnp.float64
     lr = lw - LN2 - s_row
     ld = log_diag_factor(w, z, lw) - s_row
@@ -370,7 +371,8 @@ def _lin_rows(kern, rng, lw, w, z, logm, valid, s_row):
     g_lo = lr + lw_min
     lk = jnp.log(kern(jnp.exp(logm), rng.m_max))
     ok = ((g_hi < _LIN_PART) & (g_lo > -_LIN_PART) & (g_hi + lk < _LIN_TOP)
-          & ((ld == -jnp.inf) | ((ld > -_LIN_PART) & (ld + lk < _LIN_TOP))) & (rng.m_min > 0))
+          & ((ld == -jnp.inf) | ((ld > -_LIN_PART) & (ld + lk < _LIN_TOP))) & (rng.m_min > 0)
+          & (zz <= 1000.0))   # (rates.rate_tile's exact powers of 2)
     return jnp.exp(lr), jnp.exp(ld), jnp.all(ok | ~valid)
 
 
@@ -1370,20 +1372,24 @@ def _start(cfg: _Cfg, p: dict, st: MCState):
     return st
 
 
-#: Occupied slots (hi) from which the events run with longer blocks (``_cfg_big``): 512-slot kernel tiles and
-#: 1024-slot sums and searches instead of 128 and 512. Measured on 2 CPU cores (issue-17 goal run: constant Ns,
-#: Ns* = 2000, sum kernel, to t = 20, up to ~3 900 species; docs/design_notes.md): 129-137 us per event with the longer
-#: blocks throughout against 148-161 us with the short ones; but runs that hold a few hundred species lost with them
-#: (Ns* = 100-1000 to t = 5: 31-43 against 26-34 us per event), hence the switch by the occupied prefix.
+#: Occupied slots (hi) from which the events run with longer blocks (``_cfg_big``): 2048-slot kernel tiles and
+#: 4096-slot sums and searches instead of 128 and 512. Measured on 2 CPU cores (issue-17 goal run: constant Ns,
+#: Ns* = 2000, sum kernel, to t = 20, up to ~4 000 slots in use; docs/design_notes.md): 85.6-86.4 us per event on
+#: average against 101.5-102.0 us with 512 / 1024 blocks from 2 048 slots on; at the run's state at t = 12 (4 001
+#: slots) one event took 86 against 103 us, at t = 9 (2 984 slots) 82 against 80 us. Runs that hold a few hundred
+#: species lose with long blocks (Ns* = 100-1000 to t = 5: 31-43 against 26-34 us per event with 512 / 1024
+#: blocks), hence the switch by the occupied prefix.
 BIG_BLOCKS_FROM = 2048
+#: The kernel-tile block and the cheap-pass block of ``_cfg_big``.
+BIG_BLOCK, BIG_CHEAP_BLOCK = 2048, 4096
 
 
 def _cfg_big(cfg):
     """The configuration of the events from BIG_BLOCKS_FROM occupied slots on (None where the capacity never gets
     there, or the blocks are already at least as long)."""
-    if cfg.capacity <= BIG_BLOCKS_FROM or cfg.block >= 512:
+    if cfg.capacity <= BIG_BLOCKS_FROM or cfg.block >= BIG_BLOCK:
         return None
-    return dataclasses.replace(cfg, block=512, cheap_block=1024)
+    return dataclasses.replace(cfg, block=BIG_BLOCK, cheap_block=BIG_CHEAP_BLOCK)
 
 
 def _simulate(cfg: _Cfg, p: dict, st: MCState):
