@@ -36,6 +36,60 @@ def test_n_eps_table(zi, mi, zj, mj, expect_ceil, expect_floor):
         assert 2.0 ** (30 - expect_ceil) * mj / mi == pytest.approx(6.4e-5)
 
 
+
+def _n_eps_numpy(zi, zj, lmi, lmj, log2f, rounding):
+    """N_eps from eq. (5.12)/(5.32) as written (i the lower zoom), in numpy: the independent reference."""
+    lo = zi <= zj
+    zi, zj, lmi, lmj = np.where(lo, zi, zj), np.where(lo, zj, zi), np.where(lo, lmi, lmj), np.where(lo, lmj, lmi)
+    x = (zj - zi) + (lmj - lmi) / LN2 - log2f
+    n = np.ceil(x - 1e-9) if rounding == "ceil" else np.floor(x + 1e-9)
+    return np.clip(n, 0, zj - zi).astype(int), x
+
+
+@pytest.mark.parametrize("rounding", ["ceil", "floor"])
+def test_n_eps_equals_the_formula_on_random_pairs(rounding):
+    """``n_eps`` (per-slot terms, one rounding and two clips per pair in floating point: ``rates._zoom_exp``) against
+    eq. (5.12) evaluated directly in numpy, on 200 000 random pairs with zooms 0-60, masses over 40 decades and
+    f_eps = 10^-6..10^-1, plus pairs whose x lies on an integer (m_i / m_j and f_eps powers of 2): equal
+    wherever x is not within 1e-8 of the rounding threshold."""
+    rng = np.random.default_rng(7)
+    n = 200_000
+    zi, zj = rng.integers(0, 61, n), rng.integers(0, 61, n)
+    lmi, lmj = rng.uniform(-20, 70, n), rng.uniform(-20, 70, n)
+    log2f = rng.uniform(np.log2(1e-6), np.log2(1e-1), n)
+    # x on an integer: m_i / m_j and f_eps powers of 2, x = (z_j - z_i) - q + kk in [0, z_j - z_i]
+    k = n // 10
+    zi[:k] = rng.integers(0, 30, k)
+    zj[:k] = zi[:k] + rng.integers(1, 31, k)
+    kk = rng.integers(1, 20, k)
+    q = kk + rng.integers(0, zj[:k] - zi[:k] + 1)
+    r = rng.integers(-20, 60, k)
+    lmi[:k], lmj[:k], log2f[:k] = r * LN2, (r - q) * LN2, -kk
+    x_int = (zj[:k] - zi[:k]) - q + kk
+    ref, x = _n_eps_numpy(zi, zj, lmi, lmj, log2f, rounding)
+    got = np.asarray(jax.jit(n_eps, static_argnames="rounding")(
+        jnp.asarray(zi, jnp.int32), jnp.asarray(zj, jnp.int32), jnp.asarray(lmi), jnp.asarray(lmj), jnp.asarray(log2f),
+        rounding=rounding))
+    edge = np.abs(x - np.round(x) - (1e-9 if rounding == "ceil" else -1e-9)) < 1e-8
+    assert np.mean(edge[k:]) < 1e-3
+    np.testing.assert_array_equal(got[~edge], ref[~edge])
+    # on an integer the tolerance rounds x to itself (ceil and floor agree): N_eps = x
+    np.testing.assert_array_equal(got[:k], x_int)
+    assert np.count_nonzero((x_int > 0) & (x_int < zj[:k] - zi[:k])) > k // 2
+    assert np.count_nonzero((ref > 0) & (ref < np.abs(zj - zi))) > n // 10   # the unclipped range is exercised
+
+
+def test_power_of_two_from_the_exponent_bits_is_exact():
+    """``rates.pow2`` (integer k) and ``rates._pow2_float`` (integer-valued float, no float-to-int conversion) give
+    2^k bitwise over the whole normal range -1022..1023."""
+    from jaxcoag.mc import rates
+
+    k = np.arange(-1022, 1024)
+    ref = np.ldexp(1.0, k)
+    np.testing.assert_array_equal(np.asarray(jax.jit(rates.pow2)(jnp.asarray(k, jnp.int32))), ref)
+    np.testing.assert_array_equal(np.asarray(jax.jit(rates._pow2_float)(jnp.asarray(k, jnp.float64))), ref)
+
+
 def _state():
     logm = jnp.log(jnp.array([1.0, 1e6, 3.0, 2.0, 1.0]))
     psi = jnp.zeros((5, 0))
