@@ -518,13 +518,16 @@ def test_row_pass_checks_the_round_off_of_the_incremental_rates():
 
 
 @pytest.mark.parametrize("volume", [pytest.param("const_v", marks=pytest.mark.slow), "const_ns"])
-def test_cond_and_cond_free_events_are_the_same(volume):
-    """Below ``run.COND_FREE_CAPACITY`` slots the event is a lax.cond, from it on a masked cond-free event (no
-    S-slot copy): the same run at capacity 300 and at that capacity gives the same events bit for bit, with
-    duplication (constant Ns) and without (~25 s of compile each: the run without duplication is ``-m slow``)."""
+def test_cond_and_cond_free_events_are_the_same(volume, monkeypatch):
+    """The event as a lax.cond (below ``run.COND_FREE_CAPACITY`` slots; since stop 45 only where that constant is
+    raised) and the masked cond-free event in a one-trip while loop (the default, no S-slot copy) give the same
+    events bit for bit, with duplication (constant Ns) and without. The cond run has a capacity (307) that no other
+    test compiles, so no cached cond-free program is reused (~25 s of compile each: the run without duplication is
+    ``-m slow``)."""
     vol = mc.ConstantSpecies() if volume == "const_ns" else mc.ConstantVolume()
     out = []
-    for cap in (300, RUN.COND_FREE_CAPACITY):
+    for cap, cond_free_from in ((307, 1 << 20), (313, RUN.COND_FREE_CAPACITY)):
+        monkeypatch.setattr(RUN, "COND_FREE_CAPACITY", cond_free_from)
         eng = jc.MonteCarlo(grouping=mc.EqualMass(), volume=vol, n_particles=40.0 if volume == "const_ns" else 1e30,
                             ns_target=40, f_eps=1e-3, capacity=cap, rates=mc.IncrementalRates(n_refresh=200))
         out.append(jc.evolve(K.Sum(0.5), eng, jc.Monodisperse(1.0, 1.0), jnp.array([0.0, 1.0, 3.0]),
@@ -536,6 +539,6 @@ def test_cond_and_cond_free_events_are_the_same(volume):
     for f in ("m", "w", "z", "valid", "M_tot", "logV"):
         x, y = np.asarray(getattr(a, f)), np.asarray(getattr(b, f))
         if x.ndim == 2:
-            y = y[:, :300]
+            y = y[:, :307]
         np.testing.assert_array_equal(x, y, err_msg=f)
-    assert not np.any(np.asarray(b.valid)[:, 300:])
+    assert not np.any(np.asarray(b.valid)[:, 307:])

@@ -14,7 +14,7 @@ Structure of one run (all inside ``jax.jit``; batch runs with ``jax.vmap``):
             the outcome module, donor fix-up (removal / demagnification), product zoom,
             duplication (const_n / const_ns), incremental update of the rate row sums; all reads
             of the species arrays in one-trip loops (``_opaque_reads``), the writes as one scatter per
-            array; from ``COND_FREE_CAPACITY`` slots on without a lax.cond: no capacity-sized copy per event
+            array; without a lax.cond (``COND_FREE_CAPACITY``): no capacity-sized copy per event
 
 The two-level loop keeps the O(S^2) refresh out of the per-event path even under ``vmap``
 (where ``lax.cond`` would evaluate both branches).
@@ -135,12 +135,14 @@ def _fill(cfg, p, st, t_new):
     return st._replace(k_out=k, snaps=snaps)
 
 
-#: Capacity (slots) from which the event runs without a lax.cond (no S-slot copy per event). Below it the event
-#: is a cond whose branch copies four species arrays in and out (S slots each); measured on 2 CPU cores (stop 32):
-#: at 657 live species and 8000 slots the cond-free event took 215-250 us against 175 us with the cond, at 67
-#: live species and 20 000 slots 56 us against 71 us (minima of two runs each). Both forms give the same events
-#: bitwise.
-COND_FREE_CAPACITY = 16384
+#: Capacity (slots) from which the event runs without a lax.cond (no S-slot copy per event); 0: always. Below it the
+#: event is a cond whose branch copies four species arrays in and out (S slots each). Since stop 45 the cond-free
+#: event is the body of a one-trip while loop and faster at every size measured on 2 CPU cores (us per event, cond
+#: against cond-free): Ns* = 100 / 400 / 1000 to t = 5 19.8 / 20.8 / 23.3 against 18.9 / 19.5 / 19.6, the issue-17
+#: goal run (8 000 slots) 85.3 against 81.0. (Stop 32 had found the cond faster below 16 384 slots: 175 against
+#: 215-250 us at 657 species and 8 000 slots; without the while loop the thread pool doubled the cond-free event.)
+#: Both forms give the same events bitwise.
+COND_FREE_CAPACITY = 0
 
 
 def _ns_hi_equal_mass(cfg):
@@ -1029,11 +1031,15 @@ def _event(cfg, p, st):
 
     if cfg.capacity < COND_FREE_CAPACITY:
         return jax.lax.cond(do, lambda s: go(s, True), no_event, st)._replace(snaps=snaps)
-    # large capacity: no lax.cond. XLA did not update the species arrays in place inside a cond branch (it
-    # copied four of them in and out of the branch, S slots each, on every event); the event then runs on every
-    # iteration with its writes masked (where do is False, rarely: the next maintenance refreshes) and the
-    # scalar fields are selected. Below COND_FREE_CAPACITY the cond is faster (docs/design_notes.md).
-    st2, st1 = go(st, do), no_event(st)
+    # no lax.cond (the default, COND_FREE_CAPACITY = 0): XLA did not update the species arrays in place inside a
+    # cond branch (it copied four of them in and out of the branch, S slots each, on every event); the event runs on
+    # every iteration with its writes masked (where do is False, rarely: the next maintenance refreshes) and the
+    # scalar fields are selected. The event is the body of a one-trip while loop (its trip count a runtime value):
+    # as a part of the event loop's body, XLA-CPU's thread pool ran some of its loops on the other thread, at twice
+    # the cost per event on 2 cores (Ns* = 400 to t = 5: 40.3 against 19.5 us; docs/design_notes.md)
+    one = jnp.where(st.n_events >= 0, 1, 0).astype(jnp.int32)
+    _, st2 = jax.lax.while_loop(lambda c: c[0] < one, lambda c: (c[0] + 1, go(c[1], do)), (jnp.int32(0), st))
+    st1 = no_event(st)
     big = ("m", "logm", "psi", "w", "z", "valid", "R")   # already masked by do
     out = {k: (getattr(st2, k) if k in big else jax.tree_util.tree_map(lambda x2, x1: jnp.where(do, x2, x1),
                                                                        getattr(st2, k), getattr(st1, k)))
