@@ -406,7 +406,7 @@ def test_event_loop_updates_species_arrays_in_place(volume, grouping):
     the species arrays and R in place. A copy of an S-slot array there made the cost per event follow the
     capacity (7 copies per event before stop 32; Ns* = 100: 94 us per event at S = 12 800, 308 us at 51 200,
     54 us at 150: benchmarks/results/mc_scaling.json); the reads of one array that feed another's update run in
-    ``run._opaque_reads``, and from ``run.COND_FREE_CAPACITY`` slots on the event has no lax.cond. Checked on the
+    ``run._opaque_reads``, and the event has no lax.cond (``run.COND_FREE_CAPACITY``, 0). Checked on the
     optimised HLO for the four volume/grouping paths (duplication loops included), and in the constant-Ns case also
     the loop with the longer blocks of ``run._cfg_big``; the capacity 16411 appears in no other shape. (~20 s of
     compile each: the default run checks the default grouping with and without duplication, ``-m slow`` the other

@@ -707,7 +707,8 @@ def _opaque_reads(f, arrays, *args):
     arrays happens inside it, and the scatters update the loop's outputs, of which the loop is the only other
     reader. Returns the arrays as the loop passed them (use these, not the inputs). Measured effect
     (benchmarks/results/mc_scaling.json, Ns* = 100): 54 / 94 / 308 us per event at 150 / 12 800 / 51 200 slots
-    before, 52 / 80 / 74 us after (below ``COND_FREE_CAPACITY`` the event's cond still copies four arrays)."""
+    before, 52 / 80 / 74 us after (then below ``COND_FREE_CAPACITY`` = 16 384 the event's cond still copied four
+    arrays; the event has been cond-free at every capacity since stop 45)."""
     out0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype),
                                   jax.eval_shape(lambda a, x: f(a, *x), arrays, args))
     # args[0] >= 0 (a slot count): XLA cannot prove it, so it can neither unroll the loop (one trip) nor hoist
