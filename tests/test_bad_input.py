@@ -311,6 +311,9 @@ MC_CASES = {
     "n_particles_nan": (lambda: MonteCarlo(n_particles=NAN), r"MonteCarlo\(n_particles=...\) must be a finite number"),
     "ns_target_zero": (lambda: MonteCarlo(ns_target=0), r"MonteCarlo\(ns_target=...\) must be a finite number > 0"),
     "f_eps_negative": (lambda: MonteCarlo(f_eps=-1e-3), r"MonteCarlo\(f_eps=...\) must be a finite number > 0"),
+    # from 1 on one event merges whole equal-mass groups (Golovin box: L1 1.5, 13-23 species at Ns* = 256)
+    "f_eps_one": (lambda: MonteCarlo(f_eps=1.0), r"MonteCarlo\(f_eps=...\) must be a finite number > 0 and < 1 "
+                  r"\(a small fraction such as 1e-3; from 1 on, one event merges whole equal-mass groups\)"),
     "capacity_not_int": (lambda: MonteCarlo(capacity=10.5), r"MonteCarlo\(capacity=...\) must be an integer >= 1"),
     "max_events_zero": (lambda: MonteCarlo(max_events=0), r"MonteCarlo\(max_events=...\) must be >= 1"),
     "p_protect_negative": (lambda: MonteCarlo(p_protect=-1), r"MonteCarlo\(p_protect=...\) must be >= 0"),
