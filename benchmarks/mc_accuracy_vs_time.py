@@ -93,7 +93,6 @@ def run_ours(ns_target, f_eps, seeds, times=P.TIMES, capacity_factor=None):
                         n_merge=int(r.n_merge), n_dup=int(r.n_dup), status=status,
                         l1=l1, l1_final=l1[-1], l1_coarse_final=l1c, dm_dlnr=spec))
     timed = [o for o in out if not o["first_call"]]
-    wall = float(np.mean([o["time_s"] for o in timed])) if timed else None
     # seconds per event of the timed runs; the first run's events differ (stochastic), so its
     # compile time is its time minus its own events at that rate
     per_event = (sum(o["time_s"] for o in timed) / max(sum(o["n_events"] for o in timed), 1)
