@@ -10,7 +10,7 @@ the discrete Golovin solution (``jaxcoag.analytic.mass_per_bin(..., initial="mon
 Our side: ``jaxcoag.evolve(Sum(1500), jaxcoag.MonteCarlo(grouping=jaxcoag.mc.EqualMass(), ns_target=Ns,
 f_eps=..., n_particles=...), jaxcoag.Monodisperse(m0, rho_d), t_out, key=...)`` (constant volume); sweep over Ns at
 the thesis' f_eps = 1e-3 (``--ns``) and at f_eps = 0.1 (``--bulk-feps``, ``--bulk-ns``: on the bulk of the mass as
-accurate as 1e-3 at ~4x fewer events), and over f_eps at one Ns (``--feps``); per configuration the first seed's run
+accurate as 1e-3 at ~8x fewer events), and over f_eps at one Ns (``--feps``); per configuration the first seed's run
 includes compilation (``compile_s`` = its time minus the timed run), later seeds are timed;
 events per second = events / timed wall time. PySDM: Numba CPU backend, n_sd sweep, same
 monodisperse problem (``benchmarks/peers/pysdm_golovin.py``); PySDM on its own exponential

@@ -237,7 +237,7 @@ class MonteCarlo(AbstractEngine):
             From 1 on, N_eps = 0 for two groups of equal mass and one event merges whole equal-mass groups
             (refused: on the Golovin box of ``benchmarks/mc_accuracy_vs_time.py`` at Ns* = 256 the species
             count stayed at 13-23 and the L1 error of dm/dlnr was 1.5). There, f_eps = 0.1 was as accurate on
-            the bulk of the mass as 1e-3 with ~4x fewer events, while larger values overestimated M2 (M2/M1 at
+            the bulk of the mass as 1e-3 with ~8x fewer events, while larger values overestimated M2 (M2/M1 at
             3600 s, one run each: 1.3x Golovin's at 0.1, 1.7x at 0.5, 20x at 0.99); tails and runaway bodies
             need 1e-3 to 1e-4 (thesis ch. 5).
         capacity: species slots S (static). Default: grouping None: min(n_particles, 2048) + 8;
